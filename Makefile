@@ -1,0 +1,25 @@
+# CloudSim: `make run` brings up the whole system on this machine, `make test` runs the suite.
+VENV := .venv
+BIN := $(VENV)/bin
+
+.PHONY: install run test lint bench clean
+
+install:
+	@bash deploy/install.sh
+
+run: install
+	$(BIN)/cloudsim up
+
+test: install
+	$(BIN)/python -m pytest
+
+lint: install
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/mypy cloudsim provisioners constellations
+
+bench: install
+	$(BIN)/python bench/web.py
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache .mypy_cache

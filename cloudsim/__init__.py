@@ -1,0 +1,1 @@
+"""CloudSim: cloud-hosted, real-time robot simulation competitions."""

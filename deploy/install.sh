@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Install what is missing: Debian packages, then a .venv with CloudSim (and the bundled
+# simulator) in editable mode. Fast and silent when nothing changed since the last run.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+python=${PYTHON:-python3}
+venv=.venv
+stamp=$venv/.install-stamp
+
+want_apt=$(grep -Ev '^\s*(#|$)' deploy/apt-packages.txt)
+missing=()
+for pkg in $want_apt; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+    if [ "$(id -u)" != 0 ]; then
+        echo "install: missing Debian packages (${missing[*]}); run as root or install them" >&2
+        exit 1
+    fi
+    echo "install: apt-get install ${missing[*]}"
+    # Keep apt from starting redis, sshd, ... in this namespace: CloudSim starts its own.
+    policy=/usr/sbin/policy-rc.d
+    made_policy=0
+    if [ ! -e "$policy" ]; then
+        printf '#!/bin/sh\nexit 101\n' >"$policy" && chmod +x "$policy" && made_policy=1
+    fi
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+    [ "$made_policy" = 1 ] && rm -f "$policy"
+fi
+
+manifests=(pyproject.toml)
+[ -f simulator/pyproject.toml ] && manifests+=(simulator/pyproject.toml)
+digest=$(cat "${manifests[@]}" | sha256sum | cut -c1-16)
+if [ -x "$venv/bin/python" ] && [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$digest" ]; then
+    exit 0
+fi
+echo "install: creating $venv and installing CloudSim"
+[ -x "$venv/bin/python" ] || "$python" -m venv "$venv"
+"$venv/bin/pip" install -q --upgrade pip
+targets=(-e ".[dev]")
+[ -f simulator/pyproject.toml ] && targets+=(-e ./simulator)
+"$venv/bin/pip" install -q "${targets[@]}"
+echo "$digest" >"$stamp"
