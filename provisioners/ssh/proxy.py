@@ -1,0 +1,55 @@
+"""A ProxyCommand that takes an argv and leaves no process behind."""
+
+from __future__ import annotations
+
+import os
+import select
+import subprocess
+from collections.abc import Sequence
+
+import paramiko
+
+# a proxy that ignores SIGTERM gets this long before SIGKILL
+_STOP_GRACE_SECONDS = 2.0
+
+
+class ArgvProxyCommand(paramiko.ProxyCommand):
+    """Carry the SSH stream over a child process's stdin/stdout."""
+
+    def __init__(self, argv: Sequence[str]) -> None:
+        # paramiko's own __init__ re-splits a string and leaves stderr on an unread pipe
+        self.cmd = list(argv)
+        self.process = subprocess.Popen(
+            self.cmd,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            bufsize=0,
+            start_new_session=True,
+        )
+        self.timeout: float | None = None
+
+    def recv(self, size: int) -> bytes:
+        """Return up to size bytes; b"" once the proxy has exited (end of stream)."""
+        assert self.process.stdout is not None
+        ready, _, _ = select.select([self.process.stdout], [], [], self.timeout)
+        if not ready:
+            raise TimeoutError()
+        try:
+            # unlike paramiko's version, do not spin on a proxy that closed its stdout
+            return os.read(self.process.stdout.fileno(), size)
+        except OSError as exc:
+            raise paramiko.ProxyCommandFailure(" ".join(self.cmd), exc.strerror) from exc
+
+    def close(self) -> None:
+        """Stop the proxy process and reap it."""
+        if self.process.returncode is None:
+            self.process.terminate()
+            try:
+                self.process.wait(_STOP_GRACE_SECONDS)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        for pipe in (self.process.stdin, self.process.stdout):
+            if pipe is not None:
+                pipe.close()
