@@ -1,0 +1,85 @@
+"""The application factory: everything is built here, nothing at import time."""
+
+from __future__ import annotations
+
+import logging
+from datetime import timedelta
+from pathlib import Path
+from typing import Any
+
+from flask import Flask
+from sqlalchemy import event
+
+from cloudsim.config import Config
+from cloudsim.crypto import Keyring
+from cloudsim.extensions import csrf, db, limiter, login_manager
+
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+WEB_TEMPLATES = PROJECT_ROOT / "templates" / "web"
+
+
+def create_app(config: Config | None = None) -> Flask:
+    """Build the CloudSim web app (and its Celery app) from a Config or the environment."""
+    config = config or Config.from_env()
+    app = Flask(
+        "cloudsim",
+        template_folder=str(WEB_TEMPLATES),
+        static_folder=str(WEB_TEMPLATES / "static"),
+        instance_path=str(config.instance_dir),
+    )
+    app.config.update(
+        CLOUDSIM=config,
+        SECRET_KEY=config.secret_key,
+        TESTING=config.testing,
+        SQLALCHEMY_DATABASE_URI=config.database_url,
+        SQLALCHEMY_ENGINE_OPTIONS=_engine_options(config.database_url),
+        SESSION_COOKIE_HTTPONLY=True,
+        SESSION_COOKIE_SAMESITE="Lax",
+        SESSION_COOKIE_SECURE=config.secure_cookies,
+        REMEMBER_COOKIE_HTTPONLY=True,
+        REMEMBER_COOKIE_SAMESITE="Lax",
+        REMEMBER_COOKIE_SECURE=config.secure_cookies,
+        PERMANENT_SESSION_LIFETIME=timedelta(hours=config.session_hours),
+        WTF_CSRF_TIME_LIMIT=None,  # the token lives as long as the session
+        RATELIMIT_STORAGE_URI=config.effective_redis_url,
+        RATELIMIT_HEADERS_ENABLED=True,
+        MAX_CONTENT_LENGTH=2 * 1024 * 1024,
+    )
+    logging.getLogger("cloudsim").setLevel(config.log_level)
+    app.extensions["cloudsim.keyring"] = Keyring(config.encryption_keys)
+
+    db.init_app(app)
+    if config.database_url.startswith("sqlite"):
+        with app.app_context():
+            event.listen(db.engine, "connect", _sqlite_pragmas)
+    csrf.init_app(app)
+    limiter.init_app(app)
+    login_manager.init_app(app)
+
+    from cloudsim.jobs.queue import celery_init_app
+
+    celery_init_app(app, config)
+
+    from cloudsim.api import init_api
+    from cloudsim.auth.session import init_login
+    from cloudsim.web import register_web
+
+    init_login(app)
+    init_api(app)
+    register_web(app)  # after the API: its error pages answer JSON under /api/ too
+    return app
+
+
+def _engine_options(url: str) -> dict[str, Any]:
+    if url.startswith("sqlite"):
+        return {"connect_args": {"timeout": 30}}
+    return {"pool_pre_ping": True}
+
+
+def _sqlite_pragmas(dbapi_connection: Any, _record: Any) -> None:
+    """Make SQLite safe for several processes: WAL, a busy timeout, enforced foreign keys."""
+    cursor = dbapi_connection.cursor()
+    cursor.execute("PRAGMA journal_mode=WAL")
+    cursor.execute("PRAGMA busy_timeout=30000")
+    cursor.execute("PRAGMA foreign_keys=ON")
+    cursor.close()

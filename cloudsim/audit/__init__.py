@@ -1,0 +1,1 @@
+"""The audit trail: recording and viewing who did what."""

@@ -1,0 +1,29 @@
+"""The audit log page."""
+
+from __future__ import annotations
+
+from flask import Blueprint, render_template, request
+from flask.typing import ResponseReturnValue
+from flask_login import current_user
+
+from cloudsim.audit.service import visible_events
+from cloudsim.auth.policy import role_required
+from cloudsim.extensions import db
+from cloudsim.models import Role
+
+bp = Blueprint("audit", __name__)
+PAGE_SIZE = 100
+
+
+@bp.route("/audit")
+@role_required(Role.OFFICER)
+def index() -> ResponseReturnValue:
+    page = max(1, request.args.get("page", 1, type=int) or 1)
+    action = request.args.get("action") or None
+    events = db.paginate(
+        visible_events(current_user, action=action),
+        page=page,
+        per_page=PAGE_SIZE,
+        error_out=False,
+    )
+    return render_template("audit/index.html", events=events, action=action)

@@ -1,0 +1,46 @@
+"""Who may do what: role checks shared by the web pages, the API and the services."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from functools import wraps
+from typing import Any, TypeVar, cast
+
+from flask import abort
+from flask_login import current_user
+
+from cloudsim.errors import Forbidden, NotFound
+from cloudsim.models import Role, User
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def require_role(actor: User | None, role: Role, action: str) -> None:
+    """Raise Forbidden unless the actor has `role`; None is the system itself (the CLI)."""
+    if actor is not None and not actor.has_role(role):
+        raise Forbidden(f"only {role.value}s and above may {action}")
+
+
+def require_team_access(actor: User | None, team_id: int | None) -> None:
+    """Raise NotFound (not Forbidden: a user must not learn what exists) for another team's data."""
+    if actor is None or actor.has_role(Role.OFFICER):
+        return
+    if team_id is None or actor.team_id != team_id:
+        raise NotFound("not found")
+
+
+def role_required(role: Role) -> Callable[[F], F]:
+    """Decorate a view so that only logged-in users with `role` or above reach it."""
+
+    def decorator(view: F) -> F:
+        @wraps(view)
+        def wrapped(*args: Any, **kwargs: Any) -> Any:
+            if not current_user.is_authenticated:
+                abort(401)
+            if not current_user.has_role(role):
+                abort(403)
+            return view(*args, **kwargs)
+
+        return cast(F, wrapped)
+
+    return decorator

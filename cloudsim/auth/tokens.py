@@ -1,0 +1,76 @@
+"""Per-user API tokens: shown once, stored as SHA-256, revocable."""
+
+from __future__ import annotations
+
+import hashlib
+import secrets
+from dataclasses import dataclass
+
+from sqlalchemy import select
+
+from cloudsim.audit.service import record
+from cloudsim.errors import InvalidInput, NotFound
+from cloudsim.extensions import db
+from cloudsim.models import ApiToken, User, utcnow
+
+TOKEN_PREFIX = "cst_"  # noqa: S105 (a marker, not a secret)
+MAX_ACTIVE_TOKENS = 20
+
+
+@dataclass
+class IssuedToken:
+    """A new token row and its plaintext, which is never stored."""
+
+    token: ApiToken
+    plaintext: str
+
+
+def _digest(plaintext: str) -> str:
+    return hashlib.sha256(plaintext.encode()).hexdigest()
+
+
+def issue_token(user: User, name: str) -> IssuedToken:
+    """Create a token for the user; the plaintext is returned this once only."""
+    name = " ".join(name.split())
+    if not name or len(name) > 80:
+        raise InvalidInput("token name must be 1 to 80 characters")
+    active = [t for t in user.tokens if t.revoked_at is None]
+    if len(active) >= MAX_ACTIVE_TOKENS:
+        raise InvalidInput(f"at most {MAX_ACTIVE_TOKENS} active tokens; revoke one first")
+    plaintext = TOKEN_PREFIX + secrets.token_urlsafe(32)
+    token = ApiToken(user=user, name=name, prefix=plaintext[:10], token_hash=_digest(plaintext))
+    db.session.add(token)
+    db.session.flush()
+    record(
+        "token.create",
+        user,
+        target_type="token",
+        target_id=token.id,
+        team_id=user.team_id,
+        name=name,
+    )
+    db.session.commit()
+    return IssuedToken(token, plaintext)
+
+
+def revoke_token(user: User, token_id: int) -> None:
+    """Revoke one of the user's own tokens."""
+    token = db.session.get(ApiToken, token_id)
+    if token is None or token.user_id != user.id:
+        raise NotFound(f"token {token_id} not found")
+    if token.revoked_at is None:
+        token.revoked_at = utcnow()
+        record("token.revoke", user, target_type="token", target_id=token.id, team_id=user.team_id)
+        db.session.commit()
+
+
+def user_for_token(plaintext: str) -> User | None:
+    """Return the active user a live token belongs to, noting its use."""
+    if not plaintext.startswith(TOKEN_PREFIX):
+        return None
+    token = db.session.scalar(select(ApiToken).where(ApiToken.token_hash == _digest(plaintext)))
+    if token is None or token.revoked_at is not None or not token.user.active:
+        return None
+    token.last_used_at = utcnow()
+    db.session.commit()
+    return token.user

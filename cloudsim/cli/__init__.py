@@ -1,0 +1,82 @@
+"""The `cloudsim` command: start the system, migrate the database, manage teams and users."""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from functools import wraps
+from typing import Any, TypeVar, cast
+
+import click
+from flask import Flask
+
+from cloudsim.config import Config, ConfigError
+from cloudsim.errors import CloudSimError
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+class AppHolder:
+    """Build the app once, on first use, so `cloudsim --help` needs no database."""
+
+    def __init__(self) -> None:
+        self._app: Flask | None = None
+
+    def get(self) -> Flask:
+        if self._app is None:
+            from cloudsim.app import create_app
+
+            self._app = create_app(Config.from_env())
+        return self._app
+
+
+@contextmanager
+def app_context() -> Iterator[Flask]:
+    """Yield the app inside its context."""
+    holder = click.get_current_context().find_object(AppHolder)
+    assert holder is not None
+    app = holder.get()
+    with app.app_context():
+        yield app
+
+
+def reports_errors(fn: F) -> F:
+    """Turn CloudSim errors into a one-line message and a non-zero exit code."""
+
+    @wraps(fn)
+    def wrapped(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except (CloudSimError, ConfigError) as exc:
+            raise click.ClickException(str(exc)) from None
+
+    return cast(F, wrapped)
+
+
+def emit(data: Any, as_json: bool, text: str) -> None:
+    """Print JSON for scripts or a line for people."""
+    click.echo(json.dumps(data, indent=2, default=str) if as_json else text)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.pass_context
+def main(ctx: click.Context) -> None:
+    """CloudSim: cloud-hosted, real-time robot simulation competitions."""
+    ctx.obj = AppHolder()
+
+
+def _register() -> None:
+    from cloudsim.cli import db, people, up
+
+    main.add_command(up.up)
+    main.add_command(db.db)
+    main.add_command(people.team)
+    main.add_command(people.user)
+
+
+_register()
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

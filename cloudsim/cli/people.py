@@ -1,0 +1,102 @@
+"""`cloudsim team` and `cloudsim user`: manage teams and users from the shell (as the system)."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from cloudsim.cli import app_context, emit, reports_errors
+from cloudsim.models import Role, Team, User
+from cloudsim.people import service
+
+
+def team_data(team: Team) -> dict[str, object]:
+    return {"id": team.id, "name": team.name, "members": len(team.members)}
+
+
+def user_data(user: User) -> dict[str, object]:
+    return {
+        "id": user.id,
+        "email": user.email,
+        "name": user.name,
+        "role": user.role.value,
+        "team": user.team.name if user.team else None,
+        "active": user.active,
+    }
+
+
+@click.group()
+def team() -> None:
+    """Create and list teams."""
+
+
+@team.command("create")
+@click.argument("name")
+@click.option("--json", "as_json", is_flag=True, help="Print the team as JSON.")
+@reports_errors
+def create_team(name: str, as_json: bool) -> None:
+    """Create a team called NAME."""
+    with app_context():
+        created = service.create_team(None, name)
+        emit(team_data(created), as_json, f"created team {created.name} (id {created.id})")
+
+
+@team.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def list_teams(as_json: bool) -> None:
+    """List teams."""
+    with app_context():
+        teams = service.visible_teams(None)
+        lines = "\n".join(f"{t.id}\t{t.name}\t{len(t.members)} members" for t in teams)
+        emit([team_data(t) for t in teams], as_json, lines or "no teams")
+
+
+@click.group()
+def user() -> None:
+    """Create and list users."""
+
+
+@user.command("create")
+@click.option("--email", required=True, help="Login e-mail address.")
+@click.option(
+    "--role",
+    type=click.Choice([r.value for r in Role]),
+    default=Role.USER.value,
+    show_default=True,
+)
+@click.option("--team", "team_name", help="Team name or id (required for role 'user').")
+@click.option("--name", default="", help="Display name.")
+@click.option("--password-stdin", is_flag=True, help="Read the password from standard input.")
+@click.option("--json", "as_json", is_flag=True, help="Print the user as JSON.")
+@reports_errors
+def create_user(
+    email: str, role: str, team_name: str | None, name: str, password_stdin: bool, as_json: bool
+) -> None:
+    """Create a user; without --password-stdin a password is generated and printed once."""
+    password = sys.stdin.readline().rstrip("\n") if password_stdin else None
+    with app_context():
+        team_id = service.find_team(team_name).id if team_name else None
+        created = service.create_user(
+            None, email=email, role=role, team_id=team_id, name=name, password=password
+        )
+        data = user_data(created.user)
+        text = f"created {created.user.role.value} {created.user.email} (id {created.user.id})"
+        if created.generated_password:
+            data["password"] = created.generated_password
+            text += f"\npassword: {created.generated_password}"
+        emit(data, as_json, text)
+
+
+@user.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def list_users(as_json: bool) -> None:
+    """List users."""
+    with app_context():
+        users = service.visible_users(None)
+        lines = "\n".join(
+            f"{u.id}\t{u.email}\t{u.role.value}\t{u.team.name if u.team else '-'}" for u in users
+        )
+        emit([user_data(u) for u in users], as_json, lines or "no users")

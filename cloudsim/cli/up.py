@@ -1,0 +1,137 @@
+"""`cloudsim up`: migrate, make the first admin, then run Redis, the workers and the web server."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import click
+
+from cloudsim import migrate
+from cloudsim.cli import app_context, reports_errors
+from cloudsim.config import Config
+from cloudsim.people.service import ensure_first_admin
+from cloudsim.runtime.redis_server import redis_command
+from cloudsim.runtime.supervisor import Service, Supervisor, port_open
+
+
+def _host_port(bind: str) -> tuple[str, int]:
+    host, _, port = bind.rpartition(":")
+    if not host or not port.isdigit():
+        raise click.ClickException(f"CLOUDSIM_BIND must look like HOST:PORT, got {bind!r}")
+    return host, int(port)
+
+
+def _services(config: Config) -> list[tuple[Service, float]]:
+    """Return the services to run, in start order, with how long each may take to be ready."""
+    env = dict(os.environ)
+    env["CLOUDSIM_INSTANCE_DIR"] = str(config.instance_dir)
+    env["CLOUDSIM_REDIS_URL"] = config.effective_redis_url
+    python = sys.executable
+    services: list[tuple[Service, float]] = []
+    if config.redis_url is None:
+        if port_open("127.0.0.1", config.redis_port)():
+            raise click.ClickException(
+                f"port {config.redis_port} is taken; set CLOUDSIM_REDIS_PORT or CLOUDSIM_REDIS_URL"
+            )
+        argv = redis_command(config.redis_port, config.instance_dir / "redis")
+        services.append(
+            (Service("redis", argv, env, port_open("127.0.0.1", config.redis_port)), 15)
+        )
+    log_level = config.log_level
+    services.append(
+        (
+            Service(
+                "worker",
+                [
+                    python,
+                    "-m",
+                    "celery",
+                    "-A",
+                    "cloudsim.worker",
+                    "worker",
+                    "--loglevel",
+                    log_level,
+                    "--concurrency",
+                    str(config.worker_concurrency),
+                    "--queues",
+                    "cloudsim",
+                    "--hostname",
+                    "cloudsim@%h",
+                ],
+                env,
+            ),
+            0,
+        )
+    )
+    services.append(
+        (
+            Service(
+                "beat",
+                [
+                    python,
+                    "-m",
+                    "celery",
+                    "-A",
+                    "cloudsim.worker",
+                    "beat",
+                    "--loglevel",
+                    log_level,
+                    "--schedule",
+                    str(config.instance_dir / "celerybeat-schedule"),
+                ],
+                env,
+            ),
+            0,
+        )
+    )
+    host, port = _host_port(config.bind)
+    services.append(
+        (
+            Service(
+                "web",
+                [
+                    python,
+                    "-m",
+                    "gunicorn",
+                    "--bind",
+                    config.bind,
+                    "--workers",
+                    str(config.web_workers),
+                    "--access-logfile",
+                    "-",
+                    "--log-level",
+                    log_level.lower(),
+                    "cloudsim.wsgi:app",
+                ],
+                env,
+                port_open(host, port),
+            ),
+            60,
+        )
+    )
+    return services
+
+
+@click.command()
+@reports_errors
+def up() -> None:
+    """Run CloudSim on this machine until Ctrl-C: Redis (if needed), workers, beat, web."""
+    with app_context() as app:
+        config: Config = app.config["CLOUDSIM"]
+        migrate.upgrade(app)
+        admin = ensure_first_admin(config.admin_email, config.admin_password)
+        if admin is not None:
+            click.echo(f"created the first admin: {admin.user.email}")
+            if admin.generated_password:
+                click.echo(f"  password (shown once): {admin.generated_password}")
+    supervisor = Supervisor(log=lambda line: click.echo(f"cloudsim up: {line}", err=True))
+    try:
+        for service, timeout in _services(config):
+            supervisor.add(service, timeout)
+        click.echo(f"CloudSim is running at http://{config.bind}/  (Ctrl-C stops everything)")
+        supervisor.run()
+    except RuntimeError as exc:
+        raise click.ClickException(str(exc)) from None
+    finally:
+        supervisor.stop()

@@ -1,0 +1,184 @@
+"""Configuration: one Config object fed by CLOUDSIM_* environment variables."""
+
+from __future__ import annotations
+
+import os
+import secrets
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+from cryptography.fernet import Fernet
+
+
+class ConfigError(Exception):
+    """A configuration value is missing or malformed."""
+
+
+def _bool(value: str) -> bool:
+    lowered = value.strip().lower()
+    if lowered in {"1", "true", "yes", "on"}:
+        return True
+    if lowered in {"0", "false", "no", "off", ""}:
+        return False
+    raise ValueError(f"expected true/false, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One CLOUDSIM_* variable: its default and what it means (the README table comes from here)."""
+
+    default: str
+    help: str
+
+
+# Every variable CloudSim reads. An empty default means "derived at start-up" (see help).
+SETTINGS: dict[str, Setting] = {
+    "CLOUDSIM_INSTANCE_DIR": Setting(
+        "./instance", "Folder for the database, keys, Redis data, logs"
+    ),
+    "CLOUDSIM_DATABASE_URL": Setting(
+        "", "SQLAlchemy URL; default SQLite at INSTANCE_DIR/cloudsim.db (production: PostgreSQL)"
+    ),
+    "CLOUDSIM_REDIS_URL": Setting(
+        "", "Redis for the job queue and login limits; unset = CloudSim starts its own"
+    ),
+    "CLOUDSIM_REDIS_PORT": Setting(
+        "6390", "Port of the private Redis started when no URL is given"
+    ),
+    "CLOUDSIM_SECRET_KEY": Setting(
+        "", "Signs sessions and CSRF tokens; default generated once into INSTANCE_DIR/secret.key"
+    ),
+    "CLOUDSIM_ENCRYPTION_KEYS": Setting(
+        "",
+        "Comma-separated Fernet keys for secrets at rest, newest first (rotation); default "
+        "generated once into INSTANCE_DIR/encryption.key",
+    ),
+    "CLOUDSIM_ADMIN_EMAIL": Setting("admin@example.org", "E-mail of the first admin"),
+    "CLOUDSIM_ADMIN_PASSWORD": Setting(
+        "", "Password of the first admin; unset = generated and printed once"
+    ),
+    "CLOUDSIM_BIND": Setting("127.0.0.1:5000", "Address the web server listens on"),
+    "CLOUDSIM_WEB_WORKERS": Setting("2", "gunicorn worker processes"),
+    "CLOUDSIM_WORKER_CONCURRENCY": Setting("2", "Celery worker processes"),
+    "CLOUDSIM_SECURE_COOKIES": Setting("false", "Mark cookies Secure (set true behind HTTPS)"),
+    "CLOUDSIM_SESSION_HOURS": Setting("12", "Lifetime of a login session"),
+    "CLOUDSIM_LOGIN_LIMIT": Setting(
+        "5 per minute;30 per hour", "Failed logins allowed per address and account"
+    ),
+    "CLOUDSIM_JOB_VISIBILITY_TIMEOUT": Setting(
+        "3600", "Seconds before a job whose worker vanished is handed to another worker"
+    ),
+    "CLOUDSIM_JOB_LEASE_SECONDS": Setting(
+        "30", "A running job whose worker has not renewed its lease this long is resumed elsewhere"
+    ),
+    "CLOUDSIM_STALE_JOB_SECONDS": Setting(
+        "300", "A job queued this long without starting is sent to the queue again"
+    ),
+    "CLOUDSIM_LOG_LEVEL": Setting("INFO", "Log level of the web server and workers"),
+}
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything the app needs to start, resolved from the environment once."""
+
+    instance_dir: Path
+    database_url: str
+    redis_url: str | None
+    redis_port: int
+    secret_key: str
+    encryption_keys: tuple[str, ...] = field(repr=False)
+    admin_email: str
+    admin_password: str | None = field(repr=False)
+    bind: str
+    web_workers: int
+    worker_concurrency: int
+    secure_cookies: bool
+    session_hours: int
+    login_limit: str
+    job_visibility_timeout: int
+    job_lease_seconds: int
+    stale_job_seconds: int
+    log_level: str
+    testing: bool = False
+
+    def __repr__(self) -> str:
+        shown = ", ".join(
+            f"{f.name}={getattr(self, f.name)!r}"
+            for f in fields(self)
+            if f.name not in {"secret_key", "encryption_keys", "admin_password"}
+        )
+        return f"Config({shown})"
+
+    @property
+    def effective_redis_url(self) -> str:
+        """Return the configured Redis URL or the private instance's."""
+        return self.redis_url or f"redis://127.0.0.1:{self.redis_port}/0"
+
+    @classmethod
+    def from_env(cls, environ: Mapping[str, str] | None = None, **overrides: object) -> Config:
+        """Build a Config from CLOUDSIM_* variables, generating instance keys on first use."""
+        env = os.environ if environ is None else environ
+
+        def get(name: str) -> str:
+            return env.get(name, SETTINGS[name].default)
+
+        def number(name: str) -> int:
+            try:
+                return int(get(name))
+            except ValueError:
+                raise ConfigError(f"{name} must be a whole number, got {get(name)!r}") from None
+
+        instance_dir = Path(str(overrides.pop("instance_dir", get("CLOUDSIM_INSTANCE_DIR"))))
+        instance_dir = instance_dir.expanduser().resolve()
+        instance_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            secure = _bool(get("CLOUDSIM_SECURE_COOKIES"))
+        except ValueError as exc:
+            raise ConfigError(f"CLOUDSIM_SECURE_COOKIES: {exc}") from None
+        keys = get("CLOUDSIM_ENCRYPTION_KEYS") or _instance_secret(
+            instance_dir / "encryption.key", lambda: Fernet.generate_key().decode()
+        )
+        encryption_keys = tuple(k.strip() for k in keys.split(",") if k.strip())
+        for key in encryption_keys:
+            try:
+                Fernet(key)
+            except ValueError:
+                raise ConfigError("CLOUDSIM_ENCRYPTION_KEYS holds a malformed Fernet key") from None
+        values: dict[str, object] = dict(
+            instance_dir=instance_dir,
+            database_url=get("CLOUDSIM_DATABASE_URL")
+            or f"sqlite:///{instance_dir / 'cloudsim.db'}",
+            redis_url=get("CLOUDSIM_REDIS_URL") or None,
+            redis_port=number("CLOUDSIM_REDIS_PORT"),
+            secret_key=get("CLOUDSIM_SECRET_KEY")
+            or _instance_secret(instance_dir / "secret.key", lambda: secrets.token_urlsafe(48)),
+            encryption_keys=encryption_keys,
+            admin_email=get("CLOUDSIM_ADMIN_EMAIL"),
+            admin_password=get("CLOUDSIM_ADMIN_PASSWORD") or None,
+            bind=get("CLOUDSIM_BIND"),
+            web_workers=number("CLOUDSIM_WEB_WORKERS"),
+            worker_concurrency=number("CLOUDSIM_WORKER_CONCURRENCY"),
+            secure_cookies=secure,
+            session_hours=number("CLOUDSIM_SESSION_HOURS"),
+            login_limit=get("CLOUDSIM_LOGIN_LIMIT"),
+            job_visibility_timeout=number("CLOUDSIM_JOB_VISIBILITY_TIMEOUT"),
+            job_lease_seconds=number("CLOUDSIM_JOB_LEASE_SECONDS"),
+            stale_job_seconds=number("CLOUDSIM_STALE_JOB_SECONDS"),
+            log_level=get("CLOUDSIM_LOG_LEVEL").upper(),
+        )
+        values.update(overrides)
+        return cls(**values)  # type: ignore[arg-type]
+
+
+def _instance_secret(path: Path, generate: object) -> str:
+    """Read a generated secret from the instance folder, creating it (mode 0600) the first time."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        return path.read_text().strip()
+    value = generate()  # type: ignore[operator]
+    with os.fdopen(fd, "w") as handle:
+        handle.write(value + "\n")
+    return str(value)

@@ -1,0 +1,1 @@
+"""Background jobs: the Celery queue, the job runner, and the pages that follow jobs."""

@@ -1,0 +1,114 @@
+"""Start jobs, find the ones a person may see, and re-send jobs whose delivery was lost."""
+
+from __future__ import annotations
+
+import logging
+import uuid
+from datetime import timedelta
+from typing import Any
+
+from celery import shared_task
+from flask import current_app
+from kombu.exceptions import OperationalError
+from sqlalchemy import Select, or_, select
+
+from cloudsim.audit.service import record
+from cloudsim.auth.policy import require_team_access
+from cloudsim.errors import InvalidInput, NotFound
+from cloudsim.extensions import db
+from cloudsim.jobs.runner import JOB_KINDS, run_job
+from cloudsim.models import Job, JobState, Role, User, utcnow
+
+log = logging.getLogger(__name__)
+
+
+def enqueue(
+    kind: str,
+    actor: User | None,
+    *,
+    target_type: str | None = None,
+    target_id: int | None = None,
+    team_id: int | None = None,
+    params: dict[str, Any] | None = None,
+) -> Job:
+    """Save a job and send it to the queue; if the queue is down the sweeper sends it later."""
+    if kind not in JOB_KINDS:
+        raise InvalidInput(f"unknown job kind {kind!r}; known: {', '.join(sorted(JOB_KINDS))}")
+    job_id = str(uuid.uuid4())
+    job = Job(
+        id=job_id,
+        kind=kind,
+        target_type=target_type,
+        target_id=target_id,
+        team_id=team_id,
+        params=params or {},
+        celery_id=job_id,
+        created_by_id=actor.id if actor else None,
+    )
+    db.session.add(job)
+    record("job.start", actor, target_type="job", target_id=job_id, team_id=team_id, kind=kind)
+    db.session.commit()
+    send(job)
+    return job
+
+
+def send(job: Job) -> bool:
+    """Put the job's message on the queue; return False (and log) when the broker is down."""
+    try:
+        run_job.apply_async(args=[job.id], task_id=job.id, retry=False)
+    except OperationalError as exc:
+        log.warning("job %s saved but not queued (%s); the sweeper will send it", job.id, exc)
+        return False
+    return True
+
+
+def get_job(actor: User | None, job_id: str) -> Job:
+    """Return a job the actor may see."""
+    job = db.session.get(Job, job_id)
+    if job is None:
+        raise NotFound(f"job {job_id} not found")
+    if actor is not None and not actor.has_role(Role.OFFICER):
+        require_team_access(actor, job.team_id)
+    return job
+
+
+def visible_jobs(actor: User | None, *, state: str | None = None) -> Select[tuple[Job]]:
+    """Return a query for the jobs the actor may see, newest first."""
+    query = select(Job).order_by(Job.created_at.desc(), Job.id)
+    if actor is not None and not actor.has_role(Role.OFFICER):
+        query = query.where(Job.team_id == actor.team_id, Job.team_id.is_not(None))
+    if state:
+        try:
+            query = query.where(Job.state == JobState(state))
+        except ValueError:
+            names = ", ".join(s.value for s in JobState)
+            raise InvalidInput(f"unknown job state {state!r}; choose one of {names}") from None
+    return query
+
+
+def lost_jobs() -> list[Job]:
+    """Return jobs never started in time, and running jobs whose worker's lease expired."""
+    settings = current_app.config["CLOUDSIM"]
+    now = utcnow()
+    stale_queued = now - timedelta(seconds=settings.stale_job_seconds)
+    expired = now - timedelta(seconds=settings.job_lease_seconds)
+    return list(
+        db.session.scalars(
+            select(Job).where(
+                or_(
+                    (Job.state == JobState.QUEUED) & (Job.created_at < stale_queued),
+                    (Job.state == JobState.RUNNING) & (Job.heartbeat_at < expired),
+                )
+            )
+        )
+    )
+
+
+@shared_task(name="cloudsim.jobs.sweep")
+def sweep_jobs() -> int:
+    """Re-send every lost job (the runner's claim makes a duplicate delivery harmless)."""
+    sent = 0
+    for job in lost_jobs():
+        log.info("job %s (%s) looks lost; sending it again", job.id, job.state)
+        sent += send(job)
+    return sent

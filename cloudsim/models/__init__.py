@@ -1,0 +1,32 @@
+"""CloudSim's data model."""
+
+from cloudsim.models.audit import AuditEvent
+from cloudsim.models.base import Base, utcnow
+from cloudsim.models.competition import Artifact, Run, RunState, ScoreEvent, Task
+from cloudsim.models.jobs import Job, JobState
+from cloudsim.models.machines import Constellation, ConstellationState, Machine, MachineState
+from cloudsim.models.people import ApiToken, Role, Team, User
+from cloudsim.models.secrets import Secret, SecretKind
+
+__all__ = [
+    "ApiToken",
+    "Artifact",
+    "AuditEvent",
+    "Base",
+    "Constellation",
+    "ConstellationState",
+    "Job",
+    "JobState",
+    "Machine",
+    "MachineState",
+    "Role",
+    "Run",
+    "RunState",
+    "ScoreEvent",
+    "Secret",
+    "SecretKind",
+    "Task",
+    "Team",
+    "User",
+    "utcnow",
+]

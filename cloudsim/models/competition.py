@@ -1,0 +1,134 @@
+"""The competition: scheduled tasks, the runs teams make of them, their logs and score events."""
+
+from __future__ import annotations
+
+import enum
+from datetime import datetime
+from typing import TYPE_CHECKING
+
+from sqlalchemy import BigInteger, ForeignKey, String, Text
+from sqlalchemy.orm import Mapped, mapped_column, relationship
+
+from cloudsim.models.base import Base, UTCDateTime, str_enum, utcnow
+
+if TYPE_CHECKING:
+    from cloudsim.models.machines import Constellation
+    from cloudsim.models.people import Team, User
+
+
+class Task(Base):
+    """A world and run configuration a team may run inside a time window, with network limits."""
+
+    __tablename__ = "tasks"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    team_id: Mapped[int] = mapped_column(ForeignKey("teams.id", ondelete="CASCADE"), index=True)
+    name: Mapped[str] = mapped_column(String(120))
+    world: Mapped[str] = mapped_column(String(64))
+    run_config: Mapped[int] = mapped_column(default=1)
+    window_start: Mapped[datetime] = mapped_column(UTCDateTime)
+    window_stop: Mapped[datetime] = mapped_column(UTCDateTime)
+    timeout_s: Mapped[int] = mapped_column(default=1800)
+    latency_ms: Mapped[int] = mapped_column(default=250)
+    uplink_bits: Mapped[int] = mapped_column(BigInteger)
+    downlink_bits: Mapped[int] = mapped_column(BigInteger)
+    order: Mapped[int] = mapped_column(default=0)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+
+    team: Mapped[Team] = relationship()
+    runs: Mapped[list[Run]] = relationship(back_populates="task")
+
+    def __repr__(self) -> str:
+        return f"<Task {self.id} {self.name!r} team={self.team_id} {self.world}#{self.run_config}>"
+
+    def is_open(self, at: datetime) -> bool:
+        """Return True when `at` lies inside the task's window."""
+        return self.window_start <= at < self.window_stop
+
+
+class RunState(enum.StrEnum):
+    """Life cycle of a run."""
+
+    STARTING = "starting"
+    RUNNING = "running"
+    STOPPING = "stopping"
+    FINISHED = "finished"
+    ERROR = "error"
+
+
+class Run(Base):
+    """One attempt by a team at a task, on one of its constellations."""
+
+    __tablename__ = "runs"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"), index=True)
+    team_id: Mapped[int] = mapped_column(ForeignKey("teams.id", ondelete="CASCADE"), index=True)
+    constellation_id: Mapped[int | None] = mapped_column(
+        ForeignKey("constellations.id", ondelete="SET NULL"), index=True
+    )
+    started_by_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
+    state: Mapped[RunState] = mapped_column(str_enum(RunState), default=RunState.STARTING)
+    end_reason: Mapped[str | None] = mapped_column(String(32))
+    error: Mapped[str | None] = mapped_column(Text)
+    score: Mapped[int] = mapped_column(default=0)
+    falls: Mapped[int] = mapped_column(default=0)
+    sim_seconds: Mapped[float] = mapped_column(default=0.0)
+    uplink_bits_used: Mapped[int] = mapped_column(BigInteger, default=0)
+    downlink_bits_used: Mapped[int] = mapped_column(BigInteger, default=0)
+    started_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+
+    task: Mapped[Task] = relationship(back_populates="runs")
+    team: Mapped[Team] = relationship()
+    constellation: Mapped[Constellation | None] = relationship()
+    started_by: Mapped[User | None] = relationship()
+    artifacts: Mapped[list[Artifact]] = relationship(
+        back_populates="run", cascade="all, delete-orphan"
+    )
+    score_events: Mapped[list[ScoreEvent]] = relationship(
+        back_populates="run", cascade="all, delete-orphan", order_by="ScoreEvent.sim_time"
+    )
+
+    def __repr__(self) -> str:
+        return f"<Run {self.id} task={self.task_id} team={self.team_id} {self.state} {self.score}>"
+
+
+class Artifact(Base):
+    """A log file of a run, stored outside the database and identified by its checksum."""
+
+    __tablename__ = "artifacts"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
+    kind: Mapped[str] = mapped_column(String(32))
+    filename: Mapped[str] = mapped_column(String(255))
+    location: Mapped[str] = mapped_column(String(1024))
+    size: Mapped[int] = mapped_column(BigInteger, default=0)
+    sha256: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+
+    run: Mapped[Run] = relationship(back_populates="artifacts")
+
+    def __repr__(self) -> str:
+        return f"<Artifact {self.id} run={self.run_id} {self.kind} {self.size}B>"
+
+
+class ScoreEvent(Base):
+    """A checkpoint reached (or a fall) during a run, with simulated and wall time."""
+
+    __tablename__ = "score_events"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
+    kind: Mapped[str] = mapped_column(String(16), default="checkpoint")
+    checkpoint: Mapped[int | None] = mapped_column()
+    points: Mapped[int] = mapped_column(default=0)
+    sim_time: Mapped[float] = mapped_column()
+    wall_time: Mapped[datetime] = mapped_column(UTCDateTime)
+    description: Mapped[str] = mapped_column(String(255), default="")
+
+    run: Mapped[Run] = relationship(back_populates="score_events")
+
+    def __repr__(self) -> str:
+        return f"<ScoreEvent run={self.run_id} {self.kind} {self.checkpoint} t={self.sim_time}>"

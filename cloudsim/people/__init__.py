@@ -1,0 +1,1 @@
+"""Teams and users: management by officers and admins."""

@@ -1,0 +1,43 @@
+"""Forms for managing teams and users."""
+
+from __future__ import annotations
+
+from flask_wtf import FlaskForm
+from wtforms import BooleanField, PasswordField, SelectField, StringField
+from wtforms.validators import DataRequired, Length, Optional
+
+from cloudsim.models import Role, Team
+
+NO_TEAM = ""
+
+
+class TeamForm(FlaskForm):
+    """A team's name."""
+
+    name = StringField("Team name", validators=[DataRequired(), Length(max=80)])
+
+
+class UserForm(FlaskForm):
+    """Create or edit a user; officers only see the `user` role."""
+
+    email = StringField("E-mail", validators=[DataRequired(), Length(max=254)])
+    name = StringField("Name", validators=[Optional(), Length(max=120)])
+    role = SelectField("Role", choices=[(r.value, r.value) for r in Role])
+    team = SelectField("Team", choices=[])
+    password = PasswordField(
+        "Password (leave empty to generate one)", validators=[Optional(), Length(min=10, max=256)]
+    )
+    active = BooleanField("Active", default=True)
+
+    def offer(self, teams: list[Team], can_manage_staff: bool) -> UserForm:
+        """Fill the choices with the teams and the roles this actor may assign."""
+        self.team.choices = [(NO_TEAM, "— none (officers and admins) —")] + [
+            (str(t.id), t.name) for t in teams
+        ]
+        if not can_manage_staff:
+            self.role.choices = [(Role.USER.value, Role.USER.value)]
+        return self
+
+    def team_id(self) -> int | None:
+        """Return the chosen team id, or None."""
+        return int(self.team.data) if self.team.data else None

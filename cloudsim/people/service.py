@@ -1,0 +1,301 @@
+"""Create, change and remove teams and users; every rule is checked here, for every caller."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from email_validator import EmailNotValidError, validate_email
+from sqlalchemy import func, select
+
+from cloudsim.audit.service import record
+from cloudsim.auth.passwords import generate_password, hash_password
+from cloudsim.auth.policy import require_role, require_team_access
+from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
+from cloudsim.extensions import db
+from cloudsim.models import ConstellationState, Role, Team, User
+
+TEAM_NAME_MAX = 80
+
+
+def normalise_email(email: str) -> str:
+    """Return the canonical, lower-case form of an e-mail address or raise InvalidInput."""
+    try:
+        return validate_email(email.strip(), check_deliverability=False).normalized.lower()
+    except EmailNotValidError as exc:
+        raise InvalidInput(f"invalid e-mail address: {exc}") from None
+
+
+def parse_role(value: str | Role) -> Role:
+    """Return the Role named by value or raise InvalidInput listing the valid ones."""
+    try:
+        return Role(value)
+    except ValueError:
+        names = ", ".join(r.value for r in Role)
+        raise InvalidInput(f"unknown role {value!r}; choose one of {names}") from None
+
+
+# Teams -----------------------------------------------------------------------------------
+
+
+def get_team(actor: User | None, team_id: int) -> Team:
+    """Return the team if it exists and the actor may see it."""
+    require_team_access(actor, team_id)
+    team = db.session.get(Team, team_id)
+    if team is None:
+        raise NotFound(f"team {team_id} not found")
+    return team
+
+
+def find_team(name_or_id: str) -> Team:
+    """Return the team with this name or numeric id (for the CLI)."""
+    team = db.session.scalar(select(Team).where(Team.name == name_or_id.strip()))
+    if team is None and name_or_id.isdigit():
+        team = db.session.get(Team, int(name_or_id))
+    if team is None:
+        raise NotFound(f"no team named {name_or_id!r}")
+    return team
+
+
+def visible_teams(actor: User | None) -> list[Team]:
+    """Return the teams the actor may see, by name."""
+    query = select(Team).order_by(Team.name)
+    if actor is not None and not actor.has_role(Role.OFFICER):
+        query = query.where(Team.id == actor.team_id)
+    return list(db.session.scalars(query))
+
+
+def _clean_team_name(name: str) -> str:
+    cleaned = " ".join(name.split())
+    if not cleaned:
+        raise InvalidInput("team name must not be empty")
+    if len(cleaned) > TEAM_NAME_MAX:
+        raise InvalidInput(f"team name must be at most {TEAM_NAME_MAX} characters")
+    return cleaned
+
+
+def _ensure_team_name_free(name: str, except_id: int | None = None) -> None:
+    query = select(Team.id).where(func.lower(Team.name) == name.lower())
+    if except_id is not None:
+        query = query.where(Team.id != except_id)
+    if db.session.scalar(query) is not None:
+        raise Conflict(f"a team named {name!r} already exists")
+
+
+def create_team(actor: User | None, name: str) -> Team:
+    """Create a team (officers and admins)."""
+    require_role(actor, Role.OFFICER, "create teams")
+    name = _clean_team_name(name)
+    _ensure_team_name_free(name)
+    team = Team(name=name)
+    db.session.add(team)
+    db.session.flush()
+    record("team.create", actor, target_type="team", target_id=team.id, team_id=team.id, name=name)
+    db.session.commit()
+    return team
+
+
+def rename_team(actor: User | None, team_id: int, name: str) -> Team:
+    """Rename a team (officers and admins)."""
+    require_role(actor, Role.OFFICER, "rename teams")
+    team = get_team(actor, team_id)
+    name = _clean_team_name(name)
+    _ensure_team_name_free(name, except_id=team.id)
+    old, team.name = team.name, name
+    record(
+        "team.rename",
+        actor,
+        target_type="team",
+        target_id=team.id,
+        team_id=team.id,
+        old=old,
+        new=name,
+    )
+    db.session.commit()
+    return team
+
+
+def delete_team(actor: User | None, team_id: int) -> None:
+    """Delete a team that has no members and no live constellation."""
+    require_role(actor, Role.OFFICER, "delete teams")
+    team = get_team(actor, team_id)
+    if team.members:
+        raise Conflict(f"team {team.name!r} still has {len(team.members)} member(s)")
+    live = [c for c in team.constellations if c.state != ConstellationState.TERMINATED]
+    if live:
+        raise Conflict(f"team {team.name!r} still has constellation {live[0].name!r}")
+    record("team.delete", actor, target_type="team", target_id=team.id, name=team.name)
+    db.session.delete(team)
+    db.session.commit()
+
+
+# Users -----------------------------------------------------------------------------------
+
+
+@dataclass
+class NewUser:
+    """A created user and, when CloudSim chose it, the password to hand over once."""
+
+    user: User
+    generated_password: str | None
+
+
+def get_user(actor: User | None, user_id: int) -> User:
+    """Return the user if it exists and the actor may see it (officers; or oneself)."""
+    user = db.session.get(User, user_id)
+    if actor is not None and not actor.has_role(Role.OFFICER) and actor.id != user_id:
+        raise NotFound(f"user {user_id} not found")
+    if user is None:
+        raise NotFound(f"user {user_id} not found")
+    return user
+
+
+def visible_users(actor: User | None, team_id: int | None = None) -> list[User]:
+    """Return the users the actor may see: officers all, users their own team's."""
+    query = select(User).order_by(User.email)
+    if actor is not None and not actor.has_role(Role.OFFICER):
+        query = query.where(User.team_id == actor.team_id)
+    if team_id is not None:
+        query = query.where(User.team_id == team_id)
+    return list(db.session.scalars(query))
+
+
+def _check_manage(actor: User | None, role: Role) -> None:
+    """Officers manage team users; only admins create or change officers and admins."""
+    require_role(actor, Role.OFFICER, "manage users")
+    if actor is not None and role != Role.USER and not actor.has_role(Role.ADMIN):
+        raise Forbidden("only admins may manage officers and admins")
+
+
+def _team_for_role(role: Role, team_id: int | None) -> int | None:
+    if role == Role.USER:
+        if team_id is None:
+            raise InvalidInput("a user of role 'user' must belong to a team")
+        if db.session.get(Team, team_id) is None:
+            raise NotFound(f"team {team_id} not found")
+        return team_id
+    if team_id is not None:
+        raise InvalidInput(f"{role.value}s do not belong to a team; leave the team empty")
+    return None
+
+
+def create_user(
+    actor: User | None,
+    *,
+    email: str,
+    role: str | Role = Role.USER,
+    team_id: int | None = None,
+    name: str = "",
+    password: str | None = None,
+) -> NewUser:
+    """Create a user; generate a password when none is given."""
+    role = parse_role(role)
+    _check_manage(actor, role)
+    email = normalise_email(email)
+    if db.session.scalar(select(User.id).where(User.email == email)) is not None:
+        raise Conflict(f"a user with e-mail {email} already exists")
+    team_id = _team_for_role(role, team_id)
+    generated = None if password else generate_password()
+    user = User(
+        email=email,
+        name=name.strip()[:120],
+        role=role,
+        team_id=team_id,
+        password_hash=hash_password(password or generated or ""),
+    )
+    db.session.add(user)
+    db.session.flush()
+    record(
+        "user.create",
+        actor,
+        target_type="user",
+        target_id=user.id,
+        team_id=team_id,
+        email=email,
+        role=role.value,
+    )
+    db.session.commit()
+    return NewUser(user, generated)
+
+
+def update_user(
+    actor: User | None,
+    user_id: int,
+    *,
+    name: str | None = None,
+    role: str | Role | None = None,
+    team_id: int | type[...] | None = ...,
+    active: bool | None = None,
+    password: str | None = None,
+) -> User:
+    """Change a user's name, role, team, active flag or password."""
+    user = get_user(actor, user_id)
+    _check_manage(actor, user.role)
+    new_role = parse_role(role) if role is not None else user.role
+    _check_manage(actor, new_role)
+    changes: dict[str, object] = {}
+    if actor is not None and actor.id == user.id and (new_role != user.role or active is False):
+        raise Forbidden("you cannot change your own role or disable yourself")
+    if new_role != user.role and user.role == Role.ADMIN:
+        _ensure_another_admin(user)
+    if role is not None or team_id is not ...:
+        wanted_team = user.team_id if team_id is ... else team_id
+        if new_role != Role.USER and team_id is ...:
+            wanted_team = None  # promoting a team user to officer takes them out of the team
+        user.team_id = _team_for_role(new_role, wanted_team)  # type: ignore[arg-type]
+        user.role = new_role
+        changes.update(role=new_role.value, team_id=user.team_id)
+    if name is not None:
+        user.name = name.strip()[:120]
+        changes["name"] = user.name
+    if active is not None and active != user.active:
+        if not active and user.role == Role.ADMIN:
+            _ensure_another_admin(user)
+        user.active = active
+        user.session_version += 1
+        changes["active"] = active
+    if password:
+        user.password_hash = hash_password(password)
+        user.session_version += 1
+        changes["password"] = "changed"  # noqa: S105
+    record(
+        "user.update", actor, target_type="user", target_id=user.id, team_id=user.team_id, **changes
+    )
+    db.session.commit()
+    return user
+
+
+def delete_user(actor: User | None, user_id: int) -> None:
+    """Delete a user (never oneself, never the last admin)."""
+    user = get_user(actor, user_id)
+    _check_manage(actor, user.role)
+    if actor is not None and actor.id == user.id:
+        raise Forbidden("you cannot delete your own account")
+    if user.role == Role.ADMIN:
+        _ensure_another_admin(user)
+    record(
+        "user.delete",
+        actor,
+        target_type="user",
+        target_id=user.id,
+        team_id=user.team_id,
+        email=user.email,
+    )
+    db.session.delete(user)
+    db.session.commit()
+
+
+def _ensure_another_admin(user: User) -> None:
+    others = db.session.scalar(
+        select(func.count(User.id)).where(
+            User.role == Role.ADMIN, User.active.is_(True), User.id != user.id
+        )
+    )
+    if not others:
+        raise Conflict("CloudSim needs at least one active admin")
+
+
+def ensure_first_admin(email: str, password: str | None) -> NewUser | None:
+    """Create the first admin when no admin exists; return it (with its password if generated)."""
+    if db.session.scalar(select(User.id).where(User.role == Role.ADMIN).limit(1)) is not None:
+        return None
+    return create_user(None, email=email, role=Role.ADMIN, password=password, name="Admin")

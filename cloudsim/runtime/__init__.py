@@ -1,0 +1,1 @@
+"""Processes CloudSim starts and supervises on this machine (Redis, workers, web server)."""

@@ -1,0 +1,82 @@
+"""The browser side: blueprints, error pages, template helpers."""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+from flask import Flask, render_template, request
+from flask.typing import ResponseReturnValue
+from flask_wtf.csrf import CSRFError
+from werkzeug.exceptions import HTTPException
+
+from cloudsim.auth.forms import ConfirmForm
+from cloudsim.errors import CloudSimError
+from cloudsim.extensions import db
+from cloudsim.models import Role
+
+MESSAGES = {
+    400: "The request was not understood.",
+    401: "Please log in.",
+    403: "You may not see or do that.",
+    404: "There is nothing here.",
+    405: "That action is not allowed here.",
+    413: "That upload is too large.",
+    429: "Too many attempts. Wait a minute and try again.",
+    500: "Something went wrong on our side. It has been logged.",
+}
+
+
+def register_web(app: Flask) -> None:
+    """Register every page blueprint, the error pages and the template globals."""
+    from cloudsim.audit.views import bp as audit_bp
+    from cloudsim.auth.views import bp as auth_bp
+    from cloudsim.dashboard.views import bp as dashboard_bp
+    from cloudsim.jobs.views import bp as jobs_bp
+    from cloudsim.people.views import bp as people_bp
+
+    for blueprint in (auth_bp, dashboard_bp, people_bp, jobs_bp, audit_bp):
+        app.register_blueprint(blueprint)
+
+    app.jinja_env.globals.update(Role=Role, logout_form=ConfirmForm)
+    app.jinja_env.filters["datetime"] = format_datetime
+
+    @app.errorhandler(CloudSimError)
+    def service_error(exc: CloudSimError) -> ResponseReturnValue:
+        db.session.rollback()
+        return _error_page(exc.status, str(exc))
+
+    @app.errorhandler(CSRFError)
+    def csrf_error(exc: CSRFError) -> ResponseReturnValue:
+        return _error_page(400, "The form expired or was not sent by CloudSim. Reload and retry.")
+
+    @app.errorhandler(HTTPException)
+    def http_error(exc: HTTPException) -> ResponseReturnValue:
+        code = exc.code or 500
+        # Validation errors of the API carry the message of every bad field.
+        fields = (getattr(exc, "data", None) or {}).get("messages")
+        message = "invalid input" if fields else MESSAGES.get(code, exc.description or "")
+        if code == 400 and exc.description and not fields:
+            message = exc.description
+        return _error_page(code, message, fields)
+
+    @app.errorhandler(Exception)
+    def crash(exc: Exception) -> ResponseReturnValue:
+        app.logger.exception("unhandled error on %s %s", request.method, request.path)
+        db.session.rollback()
+        return _error_page(500, MESSAGES[500])
+
+
+def format_datetime(value: datetime | None, seconds: bool = False) -> str:
+    """Show a UTC timestamp compactly; a dash when there is none."""
+    if value is None:
+        return "—"
+    return value.strftime("%Y-%m-%d %H:%M:%S" if seconds else "%Y-%m-%d %H:%M")
+
+
+def _error_page(status: int, message: str, fields: object = None) -> ResponseReturnValue:
+    if request.path.startswith("/api/"):
+        body: dict[str, object] = {"code": status, "message": message}
+        if fields:
+            body["errors"] = fields
+        return body, status
+    return render_template("error.html", status=status, message=message), status

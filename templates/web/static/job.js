@@ -1,0 +1,27 @@
+// Live job progress: poll the job's JSON and append only the new part of its log.
+(function () {
+  const box = document.getElementById("job");
+  if (!box || box.dataset.final === "true") return;
+  const log = document.getElementById("job-log");
+  let length = log.textContent.length;
+  async function poll() {
+    try {
+      const response = await fetch(box.dataset.progressUrl + "?since=" + length, {credentials: "same-origin"});
+      if (!response.ok) throw new Error(response.status);
+      const job = await response.json();
+      const state = document.getElementById("job-state");
+      state.textContent = job.state;
+      state.className = "state " + job.state;
+      document.getElementById("job-stage").textContent = job.stage || "—";
+      document.getElementById("job-progress").value = job.progress;
+      document.getElementById("job-percent").textContent = job.progress + "%";
+      document.getElementById("job-attempts").textContent = job.attempts;
+      document.getElementById("job-error").textContent = job.error || "";
+      if (job.log) { log.textContent += job.log; }
+      length = job.log_length;
+      if (job.state === "succeeded" || job.state === "failed") return;
+    } catch (e) { /* the server may be restarting: keep trying */ }
+    setTimeout(poll, 1000);
+  }
+  setTimeout(poll, 500);
+})();
