@@ -1,0 +1,229 @@
+"""Build a world's bodies in a pybullet client: ground, terrain, robot, vehicle and props."""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drcsim._bullet import BulletClient, pybullet
+from drcsim.errors import WorldError
+from drcsim.models import humanoid, props, vehicle
+from drcsim.urdf import Robot
+from drcsim.worlds import WorldSpec
+
+TIMESTEP = 0.001
+SOLVER_ITERATIONS = 20
+MODEL_CACHE = Path(tempfile.gettempdir()) / "drcsim-models"
+
+
+@dataclass(frozen=True)
+class TerrainPatch:
+    """A rectangle of ground with its own walking speed factor and surface height."""
+
+    kind: str
+    lower: tuple[float, float]
+    upper: tuple[float, float]
+    walk_speed: float
+    height: float
+
+    def contains(self, x: float, y: float) -> bool:
+        """Return whether the point (x, y) lies over this patch."""
+        return self.lower[0] <= x <= self.upper[0] and self.lower[1] <= y <= self.upper[1]
+
+
+@dataclass(frozen=True)
+class Gate:
+    """A gate's pose (x, y, yaw) and opening width."""
+
+    body: int
+    x: float
+    y: float
+    yaw: float
+    width: float
+
+
+@dataclass
+class Scene:
+    """Body ids and joint/link indices of everything a world contains."""
+
+    client: BulletClient
+    robot: int
+    robot_joints: dict[str, int]
+    robot_links: dict[str, int]
+    ground: int
+    vehicle: int | None = None
+    vehicle_joints: dict[str, int] = field(default_factory=dict)
+    hose: int | None = None
+    standpipe: int | None = None
+    table: int | None = None
+    gates: dict[str, Gate] = field(default_factory=dict)
+    terrain: list[TerrainPatch] = field(default_factory=list)
+    course: dict[str, Any] = field(default_factory=dict)
+
+    def terrain_at(self, x: float, y: float) -> TerrainPatch | None:
+        """Return the terrain patch under (x, y), if any (else paved ground)."""
+        for patch in self.terrain:
+            if patch.contains(x, y):
+                return patch
+        return None
+
+    def ground_height(self, x: float, y: float) -> float:
+        """Return the walking surface height under (x, y)."""
+        patch = self.terrain_at(x, y)
+        return patch.height if patch else 0.0
+
+
+def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
+    """Return the quaternion of a rotation by `yaw` about z."""
+    return (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+
+
+def local_to_world(pose: list[float], xyz: tuple[float, float, float]) -> list[float]:
+    """Return a point given in the frame of a planar pose (x, y, yaw) in world coordinates."""
+    x, y, yaw = pose[0], pose[1], pose[2]
+    c, s = math.cos(yaw), math.sin(yaw)
+    return [x + c * xyz[0] - s * xyz[1], y + s * xyz[0] + c * xyz[1], xyz[2]]
+
+
+def _joint_maps(client: BulletClient, body: int) -> tuple[dict[str, int], dict[str, int]]:
+    joints: dict[str, int] = {}
+    links: dict[str, int] = {}
+    for index in range(client.getNumJoints(body)):
+        info = client.getJointInfo(body, index)
+        joints[info[1].decode()] = index
+        links[info[12].decode()] = index
+    return joints, links
+
+
+def _load(client: BulletClient, model: Robot, xyz: list[float], yaw: float) -> int:
+    path = model.write(MODEL_CACHE)
+    flags = pybullet.URDF_USE_INERTIA_FROM_FILE
+    return int(client.loadURDF(str(path), xyz, yaw_quaternion(yaw), flags=flags))
+
+
+def _static_box(
+    client: BulletClient, half: list[float], centre: list[float], yaw: float, rgba: list[float]
+) -> int:
+    shape = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
+    visual = client.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=rgba)
+    return int(client.createMultiBody(0, shape, visual, centre, yaw_quaternion(yaw)))
+
+
+def _build_terrain(client: BulletClient, spec: WorldSpec, scene: Scene) -> None:
+    rng = np.random.default_rng(spec.seed)
+    for patch_id, patch in spec.terrain.items():
+        lower, upper = patch["min"], patch["max"]
+        centre = [(lower[0] + upper[0]) / 2, (lower[1] + upper[1]) / 2]
+        half = [(upper[0] - lower[0]) / 2, (upper[1] - lower[1]) / 2]
+        if patch["kind"] == "mud":
+            # A soft slab 2 cm proud of the ground: feet sink into it and slip.
+            body = _static_box(client, [*half, 0.1], [*centre, -0.08], 0.0, [0.35, 0.25, 0.1, 1])
+            client.changeDynamics(
+                body,
+                -1,
+                lateralFriction=float(patch["friction"]),
+                contactStiffness=float(patch["stiffness"]),
+                contactDamping=float(patch["damping"]),
+            )
+            height = 0.02
+        elif patch["kind"] == "rubble":
+            height = 0.0
+            for _ in range(int(patch["blocks"])):
+                size = rng.uniform([0.15, 0.15, 0.02], [0.4, 0.4, float(patch["max_height"])])
+                x = rng.uniform(lower[0], upper[0])
+                y = rng.uniform(lower[1], upper[1])
+                block = _static_box(
+                    client,
+                    list(size / 2),
+                    [x, y, size[2] / 2],
+                    float(rng.uniform(-math.pi, math.pi)),
+                    [0.5, 0.5, 0.45, 1],
+                )
+                client.changeDynamics(block, -1, lateralFriction=float(patch["friction"]))
+        else:
+            raise WorldError(f"terrain patch {patch_id!r} has unknown kind {patch['kind']!r}")
+        scene.terrain.append(
+            TerrainPatch(
+                patch["kind"],
+                (lower[0], lower[1]),
+                (upper[0], upper[1]),
+                float(patch["walk_speed"]),
+                height,
+            )
+        )
+
+
+def _build_objects(client: BulletClient, spec: WorldSpec, scene: Scene) -> None:
+    for object_id, item in spec.objects.items():
+        pose = [float(v) for v in item["pose"]]
+        model = item["model"]
+        if model == "gate":
+            body = _load(
+                client, props.build_gate(float(item["width"])), [pose[0], pose[1], 0.0], pose[2]
+            )
+            scene.gates[object_id] = Gate(body, pose[0], pose[1], pose[2], float(item["width"]))
+            scene.course.setdefault("gates", {})[object_id] = {"pose": pose, "width": item["width"]}
+        elif model == "vehicle":
+            xyz = [pose[0], pose[1], vehicle.CHASSIS_HEIGHT]
+            scene.vehicle = _load(client, vehicle.build_vehicle(), xyz, pose[2])
+            scene.vehicle_joints, _ = _joint_maps(client, scene.vehicle)
+            for wheel in vehicle.WHEELS:
+                client.changeDynamics(
+                    scene.vehicle, scene.vehicle_joints[wheel], lateralFriction=1.2
+                )
+            scene.course["vehicle"] = {
+                "pose": pose,
+                "driver_door": local_to_world(pose, vehicle.EXIT_STAND_XYZ),
+            }
+        elif model == "table":
+            scene.table = _load(client, props.build_table(), [pose[0], pose[1], 0.0], pose[2])
+            scene.course["table"] = {"pose": pose, "height": props.TABLE_HEIGHT}
+        elif model == "hose":
+            z = props.TABLE_HEIGHT + 0.045
+            scene.hose = _load(client, props.build_hose(), [pose[0], pose[1], z], pose[2])
+            for joint in range(client.getNumJoints(scene.hose)):
+                client.setJointMotorControl2(
+                    scene.hose, joint, pybullet.VELOCITY_CONTROL, force=0.2
+                )
+            scene.course["hose"] = {"coupler": [pose[0], pose[1], z]}
+        elif model == "standpipe":
+            scene.standpipe = _load(
+                client, props.build_standpipe(), [pose[0], pose[1], 0.0], pose[2]
+            )
+            client.setJointMotorControl2(scene.standpipe, 0, pybullet.VELOCITY_CONTROL, force=0.5)
+            scene.course["standpipe"] = {
+                "pose": pose,
+                "inlet": local_to_world(pose, props.INLET_XYZ),
+                "valve": local_to_world(pose, props.VALVE_XYZ),
+            }
+        else:
+            raise WorldError(f"object {object_id!r} has unknown model {model!r}")
+
+
+def build_scene(client: BulletClient, spec: WorldSpec) -> Scene:
+    """Create every body of `spec` in a freshly reset `client` and return their ids."""
+    client.resetSimulation()
+    client.setTimeStep(TIMESTEP)
+    client.setGravity(0, 0, -9.81)
+    client.setPhysicsEngineParameter(
+        numSolverIterations=SOLVER_ITERATIONS, deterministicOverlappingPairs=1
+    )
+    plane = client.createCollisionShape(pybullet.GEOM_PLANE)
+    ground = int(client.createMultiBody(0, plane))
+    client.changeDynamics(ground, -1, lateralFriction=spec.ground_friction)
+    x, y, yaw = spec.robot_start
+    scene = Scene(client, robot=-1, robot_joints={}, robot_links={}, ground=ground)
+    _build_terrain(client, spec, scene)
+    z = humanoid.STAND_PELVIS_HEIGHT + scene.ground_height(x, y)
+    scene.robot = _load(client, humanoid.build_humanoid(), [x, y, z], yaw)
+    scene.robot_joints, scene.robot_links = _joint_maps(client, scene.robot)
+    for link in (scene.robot_links["l_foot"], scene.robot_links["r_foot"]):
+        client.changeDynamics(scene.robot, link, lateralFriction=1.0)
+    _build_objects(client, spec, scene)
+    scene.course["robot_start"] = list(spec.robot_start)
+    return scene

@@ -1,0 +1,188 @@
+"""Robot sensors, each with a rate and Gaussian noise, computed only while subscribed."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from drcsim._bullet import pybullet
+from drcsim.control import JointController
+from drcsim.models import humanoid
+from drcsim.scene import Scene
+
+SENSOR_TOPICS = ("joint_states", "imu", "lidar", "camera", "contact")
+
+
+@dataclass
+class SensorSettings:
+    """Rates (Hz), noise standard deviations and geometry of every sensor."""
+
+    joint_states_hz: float = 100.0
+    joint_position_noise: float = 0.0005
+    imu_hz: float = 100.0
+    gyro_noise: float = 0.002
+    accel_noise: float = 0.02
+    lidar_hz: float = 40.0
+    lidar_beams: int = 1081
+    lidar_fov: float = math.radians(270)
+    lidar_range: float = 30.0
+    lidar_noise: float = 0.01
+    lidar_spin: float = 0.5  # rad/s of the spindle
+    camera_hz: float = 10.0
+    camera_width: int = 320
+    camera_height: int = 240
+    camera_fov_deg: float = 80.0
+    camera_noise: float = 2.0  # intensity levels (0..255)
+    contact_hz: float = 100.0
+    contact_noise: float = 0.5  # newtons
+
+    @classmethod
+    def from_mapping(cls, values: dict[str, Any]) -> SensorSettings:
+        """Return settings with `values` overriding the defaults (unknown keys are an error)."""
+        settings = cls()
+        for key, value in values.items():
+            if not hasattr(settings, key):
+                raise KeyError(f"unknown sensor setting {key!r}")
+            setattr(settings, key, type(getattr(settings, key))(value))
+        return settings
+
+
+@dataclass
+class Sensors:
+    """Computes sensor messages on their schedule for the topics someone subscribes to."""
+
+    scene: Scene
+    controller: JointController
+    settings: SensorSettings
+    seed: int
+    timestep: float
+    rngs: dict[str, np.random.Generator] = field(default_factory=dict)
+    last_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    last_imu_time: float = 0.0
+
+    def __post_init__(self) -> None:
+        # One generator per sensor: subscribing to one never shifts another's noise.
+        self.rngs = {
+            topic: np.random.default_rng([self.seed, index])
+            for index, topic in enumerate(SENSOR_TOPICS)
+        }
+        self.period = {
+            topic: max(1, round(1.0 / (self.timestep * getattr(self.settings, f"{topic}_hz"))))
+            for topic in SENSOR_TOPICS
+        }
+
+    def due(self, step: int, active: set[str]) -> list[str]:
+        """Return the subscribed sensor topics due at physics step `step`."""
+        return [t for t in SENSOR_TOPICS if t in active and step % self.period[t] == 0]
+
+    def compute(self, topic: str, sim_time: float) -> dict[str, Any]:
+        """Return one message of sensor `topic`."""
+        message: dict[str, Any] = getattr(self, f"_{topic}")(self.rngs[topic], sim_time)
+        message["t"] = round(sim_time, 6)
+        return message
+
+    def _joint_states(self, rng: np.random.Generator, _: float) -> dict[str, Any]:
+        c = self.controller
+        noise = rng.normal(0.0, self.settings.joint_position_noise, len(c.names))
+        return {
+            "name": c.names,
+            "position": (c.position + noise).tolist(),
+            "velocity": c.velocity.tolist(),
+            "effort": c.applied.tolist(),
+        }
+
+    def _imu(self, rng: np.random.Generator, sim_time: float) -> dict[str, Any]:
+        client, robot = self.scene.client, self.scene.robot
+        _, orn = client.getBasePositionAndOrientation(robot)
+        linear, angular = client.getBaseVelocity(robot)
+        dt = max(sim_time - self.last_imu_time, self.timestep)
+        accel_world = [(v - w) / dt for v, w in zip(linear, self.last_velocity, strict=True)]
+        accel_world[2] += 9.81  # an accelerometer at rest reads +g
+        self.last_velocity, self.last_imu_time = tuple(linear), sim_time
+        _, inverse = client.invertTransform([0, 0, 0], orn)
+        rotate = np.array(client.getMatrixFromQuaternion(inverse)).reshape(3, 3)
+        gyro = rotate @ np.array(angular) + rng.normal(0, self.settings.gyro_noise, 3)
+        accel = rotate @ np.array(accel_world) + rng.normal(0, self.settings.accel_noise, 3)
+        return {
+            "orientation": list(orn),
+            "angular_velocity": gyro.tolist(),
+            "linear_acceleration": accel.tolist(),
+        }
+
+    def _head_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        state = self.scene.client.getLinkState(
+            self.scene.robot, self.scene.robot_links[humanoid.HEAD_LINK]
+        )
+        rotation = np.array(self.scene.client.getMatrixFromQuaternion(state[1])).reshape(3, 3)
+        return np.array(state[0]), rotation
+
+    def _lidar(self, rng: np.random.Generator, sim_time: float) -> dict[str, Any]:
+        s = self.settings
+        origin, rotation = self._head_pose()
+        spindle = (s.lidar_spin * sim_time) % (2 * math.pi)
+        angles = np.linspace(-s.lidar_fov / 2, s.lidar_fov / 2, s.lidar_beams)
+        # Scan plane: the head's x-y plane rolled about the head x axis by the spindle angle.
+        local = np.stack(
+            [
+                np.cos(angles),
+                np.sin(angles) * math.cos(spindle),
+                np.sin(angles) * math.sin(spindle),
+            ],
+            axis=1,
+        )
+        directions = local @ rotation.T
+        start = origin + rotation @ np.array([0.1, 0.0, 0.12])
+        starts = np.repeat(start[None, :], s.lidar_beams, axis=0)
+        ends = starts + directions * s.lidar_range
+        hits = self.scene.client.rayTestBatch(starts.tolist(), ends.tolist())
+        ranges = np.array([h[2] for h in hits]) * s.lidar_range
+        ranges = ranges + rng.normal(0.0, s.lidar_noise, s.lidar_beams)
+        ranges = np.clip(ranges, 0.0, s.lidar_range).astype(np.float32)
+        return {
+            "angle_min": -s.lidar_fov / 2,
+            "angle_max": s.lidar_fov / 2,
+            "spindle": spindle,
+            "range_max": s.lidar_range,
+            "ranges": ranges.tobytes(),
+        }
+
+    def _camera(self, rng: np.random.Generator, _: float) -> dict[str, Any]:
+        s = self.settings
+        origin, rotation = self._head_pose()
+        eye = origin + rotation @ np.array([0.14, 0.0, 0.08])
+        forward, up = rotation[:, 0], rotation[:, 2]
+        client = self.scene.client
+        view = client.computeViewMatrix(eye.tolist(), (eye + forward).tolist(), up.tolist())
+        projection = client.computeProjectionMatrixFOV(
+            s.camera_fov_deg, s.camera_width / s.camera_height, 0.05, 50.0
+        )
+        _, _, rgba, _, _ = client.getCameraImage(
+            s.camera_width, s.camera_height, view, projection, renderer=pybullet.ER_TINY_RENDERER
+        )
+        image = np.reshape(np.asarray(rgba, dtype=np.uint8), (s.camera_height, s.camera_width, 4))[
+            :, :, :3
+        ]
+        noisy = image + rng.normal(0.0, s.camera_noise, image.shape)
+        pixels = np.clip(noisy, 0, 255).astype(np.uint8)
+        return {
+            "width": s.camera_width,
+            "height": s.camera_height,
+            "encoding": "rgb8",
+            "data": pixels.tobytes(),
+        }
+
+    def _contact(self, rng: np.random.Generator, _: float) -> dict[str, Any]:
+        client, scene = self.scene.client, self.scene
+        forces: dict[str, float] = {}
+        for hand in ("left", "right"):
+            total = 0.0
+            for link_name in (humanoid.HAND_LINKS[hand], humanoid.FINGER_LINKS[hand]):
+                link = scene.robot_links[link_name]
+                total += sum(
+                    p[9] for p in client.getContactPoints(bodyA=scene.robot, linkIndexA=link)
+                )
+            forces[hand] = max(0.0, total + float(rng.normal(0.0, self.settings.contact_noise)))
+        return {"force": forces}
