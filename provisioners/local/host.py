@@ -1,0 +1,267 @@
+"""Start and stop one host: overlay root, first boot, then systemd-nspawn -b or tini + sshd."""
+
+import re
+import shutil
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from provisioners.local import processes
+from provisioners.local.commands import run_command
+from provisioners.local.errors import HostBootError
+from provisioners.local.netns import can_connect, netns_path
+from provisioners.local.processes import ProcessId
+
+INIT_SYSTEMD = "systemd"
+INIT_MINIMAL = "minimal"
+INIT_MODES = (INIT_SYSTEMD, INIT_MINIMAL)
+
+SYSTEMD_BINARY = Path("/usr/lib/systemd/systemd")
+SSH_PORT = 22
+# Units the base image enables that a host still needs: its sshd.
+KEEP_ENABLED_UNITS = frozenset({"ssh.service", "sshd.service", "ssh.socket"})
+# nspawn would start a getty on its (passive) console: nobody logs in there.
+ALWAYS_MASKED_UNITS = ("console-getty.service",)
+MASKABLE_SUFFIXES = (".service", ".timer", ".path", ".socket")
+LAUNCHER_EXIT_SECONDS = 5.0
+KILL_WAIT_SECONDS = 10.0
+POLL_SECONDS = 0.05
+
+# Runs outside the host's root (in the launcher's private mount namespace), on first boot only:
+# later boots (reboot_node) must not trust paths the host itself may have replaced by symlinks.
+_FIRST_BOOT = r"""
+first_boot() {
+  local root=$1 hostname=$2 machine_id=$3 authorized_keys=$4
+  shift 4
+  local marker=$root/var/lib/cloudsim-local-first-boot
+  [ -e "$marker" ] && return 0
+  printf '%s\n' "$hostname" > "$root/etc/hostname"
+  printf '%s\n' "$machine_id" > "$root/etc/machine-id"
+  printf '127.0.0.1\tlocalhost\n127.0.1.1\t%s\n' "$hostname" > "$root/etc/hosts"
+  rm -f "$root"/etc/ssh/ssh_host_*
+  ssh-keygen -q -A -f "$root"
+  install -d -m 700 "$root/root/.ssh"
+  install -m 600 "$authorized_keys" "$root/root/.ssh/authorized_keys"
+  local unit
+  for unit in "$@"; do ln -sfn /dev/null "$root/etc/systemd/system/$unit"; done
+  touch "$marker"
+}
+"""
+
+_MOUNT_OVERLAY = r"""
+root=$host_dir/root
+mount -t overlay "$machine" \
+  -o "lowerdir=/,upperdir=$host_dir/upper,workdir=$host_dir/work" "$root"
+"""
+
+# PID 1 of fresh mount/UTS/IPC/PID namespaces, already inside the host's network namespace.
+_MINIMAL_INIT = (
+    "set -euo pipefail\n"
+    + _FIRST_BOOT
+    + "host_dir=$1 hostname=$2 machine=$3 machine_id=$4 authorized_keys=$5\n"
+    + _MOUNT_OVERLAY
+    + r"""
+first_boot "$root" "$hostname" "$machine_id" "$authorized_keys"
+mount -t proc proc "$root/proc"
+mount -t sysfs sysfs "$root/sys"
+mount --rbind /dev "$root/dev"
+mount -t tmpfs -o mode=755 tmpfs "$root/run"
+mount -t tmpfs -o mode=1777 tmpfs "$root/tmp"
+install -d -m 755 "$root/run/sshd"
+hostname "$hostname"
+exec chroot "$root" /usr/bin/tini -s -- /usr/sbin/sshd -D -e
+"""
+)
+
+# Runs in a private mount namespace, so the overlay and nspawn's propagation directory vanish
+# with the host instead of lingering in the root mount table.
+_SYSTEMD_BOOT = (
+    "set -euo pipefail\n"
+    + _FIRST_BOOT
+    + "host_dir=$1 hostname=$2 machine=$3 machine_id=$4 authorized_keys=$5 netns=$6\n"
+    + "shift 6\n"
+    + _MOUNT_OVERLAY
+    + r"""
+first_boot "$root" "$hostname" "$machine_id" "$authorized_keys" "$@"
+propagate=/run/systemd/nspawn/propagate
+mkdir -p "$propagate"
+mount -t tmpfs -o mode=700 "$machine-propagate" "$propagate"
+tun=()
+if [ -c /dev/net/tun ]; then tun=(--bind=/dev/net/tun); fi
+exec systemd-nspawn --quiet --directory="$root" --boot --machine="$machine" \
+  --hostname="$hostname" --register=no --keep-unit --console=passive \
+  --capability=CAP_NET_ADMIN "${tun[@]}" --network-namespace-path="/run/netns/$netns"
+"""
+)
+
+# Records the launcher's PID (as seen from the root namespace) before becoming the launcher.
+_LAUNCHER = 'set -eu\nprintf "%s\\n" "$$" > "$1"\nshift\nexec "$@"\n'
+
+_ANSI_ESCAPE = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")
+
+
+@dataclass(frozen=True)
+class HostSpec:
+    """Everything needed to boot one host."""
+
+    hostname: str
+    machine: str
+    netns: str
+    init: str
+    host_dir: Path
+    node_dir: Path
+    machine_id: str
+
+    @property
+    def boot_log(self) -> Path:
+        """Return the file collecting the launcher's and the host console's output."""
+        return self.node_dir / "boot.log"
+
+    @property
+    def authorized_keys(self) -> Path:
+        """Return the file whose content becomes /root/.ssh/authorized_keys in the host."""
+        return self.node_dir / "authorized_keys"
+
+    @property
+    def launcher_pidfile(self) -> Path:
+        """Return the file where the launcher writes its PID."""
+        return self.node_dir / "launcher.pid"
+
+
+@dataclass(frozen=True)
+class HostProcesses:
+    """The launcher (unshare or systemd-nspawn) and the host's init (PID 1 inside)."""
+
+    launcher: ProcessId
+    init: ProcessId
+
+
+def systemd_boot_available() -> bool:
+    """Say whether hosts can boot systemd (systemd-nspawn and systemd are installed)."""
+    return shutil.which("systemd-nspawn") is not None and SYSTEMD_BINARY.exists()
+
+
+def units_to_mask(systemd_dir: Path = Path("/etc/systemd/system")) -> list[str]:
+    """Return the units the base image enables that a host must not start."""
+    units = set(ALWAYS_MASKED_UNITS)
+    for wants_dir in [*systemd_dir.glob("*.wants"), *systemd_dir.glob("*.requires")]:
+        for link in wants_dir.iterdir():
+            if link.name.endswith(MASKABLE_SUFFIXES) and link.name not in KEEP_ENABLED_UNITS:
+                units.add(link.name)
+    return sorted(units)
+
+
+def launch_command(spec: HostSpec, masked_units: list[str]) -> list[str]:
+    """Return the argv that boots the host and records the launcher's PID."""
+    common = [str(spec.host_dir), spec.hostname, spec.machine, spec.machine_id]
+    if spec.init == INIT_SYSTEMD:
+        inner = [
+            "env", "SYSTEMD_NSPAWN_API_VFS_WRITABLE=network",
+            "unshare", "--mount", "--propagation", "private", "--",
+            "bash", "-c", _SYSTEMD_BOOT, "host-boot",
+            *common, str(spec.authorized_keys), spec.netns, *masked_units,
+        ]  # fmt: skip
+    else:
+        inner = [
+            "nsenter", f"--net={netns_path(spec.netns)}",
+            "unshare", "--mount", "--uts", "--ipc", "--pid", "--fork", "--kill-child",
+            "--propagation", "private", "--",
+            "bash", "-c", _MINIMAL_INIT, "host-init", *common, str(spec.authorized_keys),
+        ]  # fmt: skip
+    # setsid -f detaches the launcher: it must outlive (and not be reaped by) this process.
+    return ["setsid", "-f", "bash", "-c", _LAUNCHER, "launcher", str(spec.launcher_pidfile), *inner]
+
+
+def start_host(spec: HostSpec, timeout: float) -> HostProcesses:
+    """Launch the host and return once its init runs; raise HostBootError otherwise."""
+    for directory in ("upper", "work", "root"):
+        (spec.host_dir / directory).mkdir(parents=True, exist_ok=True)
+    # The upper dir's mode becomes the mode of the host's "/": it must match the real one.
+    (spec.host_dir / "upper").chmod(0o755)
+    masked = units_to_mask() if spec.init == INIT_SYSTEMD else []
+    with open(spec.boot_log, "ab") as log:
+        subprocess.run(
+            launch_command(spec, masked),
+            stdin=subprocess.DEVNULL,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            check=True,
+            timeout=timeout,
+        )
+    deadline = time.monotonic() + timeout
+    launcher = _wait_for_launcher(spec, deadline)
+    while True:
+        init = processes.find_namespace_init(launcher)
+        if init is not None:
+            return HostProcesses(launcher=launcher, init=init)
+        if not processes.is_alive(launcher):
+            raise HostBootError(f"host {spec.hostname}: the launcher exited before init started")
+        if time.monotonic() >= deadline:
+            raise HostBootError(f"host {spec.hostname}: init did not start in {timeout:.0f} s")
+        time.sleep(POLL_SECONDS)
+
+
+def _wait_for_launcher(spec: HostSpec, deadline: float) -> ProcessId:
+    while True:
+        text = spec.launcher_pidfile.read_text() if spec.launcher_pidfile.exists() else ""
+        if text.endswith("\n"):
+            launcher = processes.identify(int(text))
+            if launcher is None:
+                raise HostBootError(f"host {spec.hostname}: the launcher exited at once")
+            return launcher
+        if time.monotonic() >= deadline:
+            raise HostBootError(f"host {spec.hostname}: the launcher did not start")
+        time.sleep(POLL_SECONDS)
+
+
+def wait_for_sshd(spec: HostSpec, host: HostProcesses, timeout: float) -> None:
+    """Poll until sshd accepts TCP connections inside the host; raise HostBootError if not."""
+    deadline = time.monotonic() + timeout
+    while not can_connect(spec.netns, "127.0.0.1", SSH_PORT):
+        if not processes.is_alive(host.init):
+            raise HostBootError(f"host {spec.hostname}: init exited before sshd listened")
+        if time.monotonic() >= deadline:
+            raise HostBootError(f"host {spec.hostname}: sshd did not listen in {timeout:.0f} s")
+        time.sleep(POLL_SECONDS)
+
+
+def stop_host(launcher: ProcessId | None, init: ProcessId | None) -> None:
+    """Kill the host's init (its whole PID namespace dies) and wait for the launcher to exit."""
+    if init is None and launcher is not None and processes.is_alive(launcher):
+        init = processes.find_namespace_init(launcher)
+    if init is not None:
+        processes.kill(init, KILL_WAIT_SECONDS)
+    # nspawn tidies up after its container died; only a stuck launcher gets SIGKILL.
+    if launcher is not None and not processes.wait_until_gone(launcher, LAUNCHER_EXIT_SECONDS):
+        processes.kill(launcher, KILL_WAIT_SECONDS)
+
+
+def boot_log_tail(spec: HostSpec, lines: int = 30) -> str:
+    """Return the last lines of the host's boot log, without terminal colour codes."""
+    if not spec.boot_log.exists():
+        return "(no boot log)"
+    text = _ANSI_ESCAPE.sub("", spec.boot_log.read_text(errors="replace"))
+    return "\n".join(text.splitlines()[-lines:])
+
+
+def remove_host_files(spec: HostSpec) -> None:
+    """Remove the host's overlay directories and nspawn's leftover propagation directory."""
+    if spec.host_dir.exists():
+        shutil.rmtree(spec.host_dir)
+    propagate_dir = Path("/run/systemd/nspawn/propagate") / spec.machine
+    if propagate_dir.exists():
+        shutil.rmtree(propagate_dir)
+
+
+def mount_hosts_tmpfs(hosts_dir: Path, source: str) -> None:
+    """Mount the tmpfs holding every host's overlay upper dir, unless already mounted."""
+    hosts_dir.mkdir(parents=True, exist_ok=True)
+    if not hosts_dir.is_mount():
+        run_command(["mount", "-t", "tmpfs", "-o", "mode=700", source, str(hosts_dir)])
+
+
+def unmount_hosts_tmpfs(hosts_dir: Path) -> None:
+    """Unmount the hosts tmpfs; no-op when it is not mounted."""
+    if hosts_dir.is_dir() and hosts_dir.is_mount():
+        run_command(["umount", str(hosts_dir)])

@@ -1,0 +1,178 @@
+"""A network with a public systemd host and a LAN-only minimal host, checked over real SSH."""
+
+import subprocess
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from ipaddress import ip_address, ip_network
+from pathlib import Path
+
+import pytest
+from libcloud.compute.base import Node
+from libcloud.compute.types import NodeState
+from local_support import HostShell, SshKey, needs_root
+
+from provisioners.local import processes
+from provisioners.local.driver import LocalNodeDriver
+from provisioners.local.network import LocalNetwork
+
+pytestmark = [pytest.mark.hosts, needs_root]
+
+Shells = Callable[[Node, SshKey], HostShell]
+
+
+@dataclass(frozen=True)
+class Lan:
+    """The module's network and its two hosts."""
+
+    network: LocalNetwork
+    router: Node
+    sim: Node
+
+
+@pytest.fixture(scope="module")
+def lan(driver: LocalNodeDriver, ssh_key: SshKey) -> Iterator[Lan]:
+    """Create network "lan" with router (public, systemd) and sim (LAN only, minimal)."""
+    network = driver.ex_create_network("lan")
+    created: list[Node] = []
+    try:
+        created.append(
+            driver.create_node(
+                "router", driver.list_sizes()[0], driver.list_images()[0],
+                auth=ssh_key.auth, ex_network=network, ex_public=True,
+                ex_tags={"role": "router"}, ex_init="systemd",
+            )
+        )  # fmt: skip
+        created.append(
+            driver.create_node(
+                "sim", driver.list_sizes()[0], driver.list_images()[0],
+                auth=ssh_key.auth, ex_network=network, ex_tags={"role": "sim"}, ex_init="minimal",
+            )
+        )  # fmt: skip
+        yield Lan(network=network, router=created[0], sim=created[1])
+    finally:
+        for node in created:
+            driver.destroy_node(node)
+        driver.ex_destroy_network(network)
+
+
+def test_nodes_carry_addresses_tags_and_how_to_reach_them(lan: Lan) -> None:
+    subnet = ip_network(lan.network.cidr)
+    assert ip_address(lan.router.private_ips[0]) in subnet
+    assert ip_address(lan.sim.private_ips[0]) in subnet
+    assert ip_address(lan.router.public_ips[0]) in ip_network("198.18.0.0/24")
+    assert lan.sim.public_ips == []
+    assert lan.router.extra["tags"] == {"role": "router"}
+    assert (lan.router.extra["init"], lan.sim.extra["init"]) == ("systemd", "minimal")
+    assert lan.router.extra["network"] == lan.sim.extra["network"] == "lan"
+    for node in (lan.router, lan.sim):
+        assert node.state == NodeState.RUNNING
+        assert Path("/run/netns", node.extra["netns"]).exists()
+        assert f"--net=/run/netns/{node.extra['netns']}" in node.extra["ssh_proxy_command"]
+
+
+def test_each_host_has_its_own_hostname_and_host_key(
+    lan: Lan, ssh_key: SshKey, shells: Shells
+) -> None:
+    router, sim = shells(lan.router, ssh_key), shells(lan.sim, ssh_key)
+    assert router.check("hostname").strip() == "router"
+    assert sim.check("hostname").strip() == "sim"
+    assert router.host_key.asbytes() != sim.host_key.asbytes()
+    controller_keys = {
+        path.read_text().split()[1] for path in Path("/etc/ssh").glob("ssh_host_*_key.pub")
+    }
+    assert router.host_key.get_base64() not in controller_keys
+    assert sim.host_key.get_base64() not in controller_keys
+
+
+def test_each_host_has_its_own_etc(lan: Lan, ssh_key: SshKey, shells: Shells) -> None:
+    marker = "/etc/cloudsim-local-test-marker"
+    router, sim = shells(lan.router, ssh_key), shells(lan.sim, ssh_key)
+    router.check(f"echo written-on-router > {marker}")
+    assert router.check(f"cat {marker}").strip() == "written-on-router"
+    assert sim.run(f"test -e {marker}")[0] == 1
+    assert not Path(marker).exists()
+
+
+def test_pid_1_is_the_hosts_own_init(lan: Lan, ssh_key: SshKey, shells: Shells) -> None:
+    router, sim = shells(lan.router, ssh_key), shells(lan.sim, ssh_key)
+    assert router.check("cat /proc/1/comm").strip() == "systemd"
+    assert sim.check("cat /proc/1/comm").strip() == "tini"
+    # The controller's processes are invisible inside a host.
+    assert int(sim.check("ls /proc | grep -c '^[0-9]'")) < 10
+    for node, command in ((lan.router, "systemd"), (lan.sim, "tini")):
+        assert Path(f"/proc/{node.extra['pid']}/comm").read_text().strip() == command
+
+
+def test_systemd_host_boots_with_ssh_and_base_image_services_masked(
+    lan: Lan, ssh_key: SshKey, shells: Shells
+) -> None:
+    router = shells(lan.router, ssh_key)
+    assert router.check("systemctl is-active ssh").strip() == "active"
+    for unit in ("postgresql.service", "redis-server.service"):
+        status, out, _ = router.run(f"systemctl is-enabled {unit}")
+        assert out.strip() == "masked", f"{unit}: {out} (exit {status})"
+    state = router.run("systemctl is-system-running --wait")[1].strip()
+    assert state in ("running", "degraded")
+
+
+def test_hosts_can_forward_and_open_tun(lan: Lan, ssh_key: SshKey, shells: Shells) -> None:
+    for node in (lan.router, lan.sim):
+        shell = shells(node, ssh_key)
+        shell.check("sysctl -w net.ipv4.ip_forward=1")
+        assert shell.check("cat /proc/sys/net/ipv4/ip_forward").strip() == "1"
+        shell.check("ip tuntap add dev tun9 mode tun && ip link delete tun9")
+    assert Path("/proc/sys/net/ipv4/ip_forward").read_text().strip() in ("0", "1")
+
+
+def test_lan_hosts_reach_each_other(lan: Lan, ssh_key: SshKey, shells: Shells) -> None:
+    router, sim = shells(lan.router, ssh_key), shells(lan.sim, ssh_key)
+    sim.check(f"ping -c 1 -W 2 {lan.router.private_ips[0]}")
+    router.check(f"ping -c 1 -W 2 {lan.sim.private_ips[0]}")
+
+
+def _banner_from_public_side(
+    driver: LocalNodeDriver, ip: str
+) -> subprocess.CompletedProcess[bytes]:
+    return subprocess.run(
+        driver.ex_public_proxy_command(ip, 22),
+        input=b"",
+        capture_output=True,
+        timeout=20,
+        check=False,
+    )
+
+
+def test_public_side_reaches_router_but_not_lan_only_host(
+    driver: LocalNodeDriver, lan: Lan
+) -> None:
+    to_router = _banner_from_public_side(driver, lan.router.public_ips[0])
+    assert to_router.stdout.startswith(b"SSH-2.0-")
+    to_sim = _banner_from_public_side(driver, lan.sim.private_ips[0])
+    assert to_sim.returncode != 0
+    assert b"SSH-2.0-" not in to_sim.stdout
+
+
+def test_fresh_driver_rediscovers_running_nodes(
+    lan: Lan, make_driver: Callable[[], LocalNodeDriver]
+) -> None:
+    fresh = make_driver()
+    found = {node.name: node for node in fresh.list_nodes()}
+    assert set(found) == {"router", "sim"}
+    for original in (lan.router, lan.sim):
+        again = found[original.name]
+        assert again.state == NodeState.RUNNING
+        assert again.id == original.id
+        assert again.extra["pid"] == original.extra["pid"]
+        assert again.private_ips == original.private_ips
+        assert again.public_ips == original.public_ips
+    assert [network.cidr for network in fresh.ex_list_networks()] == [lan.network.cidr]
+    running = fresh.wait_until_running(
+        [found["router"], found["sim"]], wait_period=0.1, timeout=10, ssh_interface="private_ips"
+    )
+    assert {node.name for node, _ips in running} == {"router", "sim"}
+
+
+def test_recorded_pid_is_identified_by_start_time(lan: Lan) -> None:
+    init = processes.identify(lan.sim.extra["pid"])
+    assert init is not None and processes.is_alive(init)
+    assert not processes.is_alive(processes.ProcessId(init.pid, init.start_time + 1))
