@@ -56,7 +56,7 @@ class SSHExecutor:
         self._mask = SecretMasker(secrets)
         self._default_timeout = default_timeout
         self._max_parallel = max_parallel
-        self._pool = ConnectionPool(host_keys, connect_policy or ConnectPolicy(), self._log)
+        self._pool = ConnectionPool(host_keys, connect_policy or ConnectPolicy(), self.log)
 
     def add_secret(self, secret: str) -> None:
         """Mask one more secret in everything logged from now on."""
@@ -79,7 +79,7 @@ class SSHExecutor:
         timeout = self._default_timeout if timeout is None else timeout
         if timeout <= 0:
             raise ValueError("timeout must be positive")
-        self._log(machine.name, f"$ {'sudo ' if sudo else ''}{command}")
+        self.log(machine.name, f"$ {'sudo ' if sudo else ''}{command}")
         # the remote `timeout` kills the whole process group, so nothing outlives a timeout
         remote = (
             f"timeout --kill-after={_KILL_AFTER_SECONDS} {timeout:g} sh -c {shlex.quote(command)}"
@@ -93,7 +93,7 @@ class SSHExecutor:
             result = self._collect(machine, channel, command, started, timeout)
         finally:
             channel.close()
-        self._log(machine.name, f"-> exit {result.exit_code} in {result.duration:.2f} s")
+        self.log(machine.name, f"-> exit {result.exit_code} in {result.duration:.2f} s")
         if result.exit_code in _TIMEOUT_EXIT_CODES and result.duration >= timeout:
             raise CommandTimeout(machine.name, self._mask(command), timeout)
         if check and not result.ok:
@@ -107,7 +107,7 @@ class SSHExecutor:
         remote = PurePosixPath(remote_path)
         partial = str(remote.with_name(f".{remote.name}.{token_source.token_hex(6)}.part"))
         label = f"{len(source)} bytes" if isinstance(source, bytes) else str(source)
-        self._log(machine.name, f"put {label} -> {remote_path} (mode {mode:04o})")
+        self.log(machine.name, f"put {label} -> {remote_path} (mode {mode:04o})")
         digest, size = hashlib.sha256(), 0
         connection = self._pool.get(machine)
         with self._pool.machine_lock(machine):
@@ -130,7 +130,7 @@ class SSHExecutor:
         """Download a remote file over SFTP in chunks, replacing local_path when complete."""
         local = Path(local_path)
         partial = local.with_name(f".{local.name}.{token_source.token_hex(6)}.part")
-        self._log(machine.name, f"get {remote_path} -> {local}")
+        self.log(machine.name, f"get {remote_path} -> {local}")
         digest, size = hashlib.sha256(), 0
         connection = self._pool.get(machine)
         with self._pool.machine_lock(machine):
@@ -193,7 +193,8 @@ class SSHExecutor:
     ) -> None:
         self.close()
 
-    def _log(self, machine_name: str, line: str) -> None:
+    def log(self, machine_name: str, line: str) -> None:
+        """Send one line about a machine to the log sink, secrets masked."""
         self._sink(machine_name, self._mask(line))
 
     def _open_session(self, machine: Machine) -> paramiko.Channel:
@@ -201,7 +202,7 @@ class SSHExecutor:
             return _session(self._pool.get(machine))
         except (OSError, EOFError, paramiko.SSHException) as exc:
             # a cached connection whose machine rebooted: reconnect once
-            self._log(machine.name, f"connection lost ({exc}), reconnecting")
+            self.log(machine.name, f"connection lost ({exc}), reconnecting")
             self._pool.discard(machine)
             return _session(self._pool.get(machine))
 
@@ -214,8 +215,8 @@ class SSHExecutor:
         timeout: float,
     ) -> CommandResult:
         deadline = started + timeout + _CLIENT_GRACE_SECONDS
-        stdout = LineStream(lambda line: self._log(machine.name, line))
-        stderr = LineStream(lambda line: self._log(machine.name, f"! {line}"))
+        stdout = LineStream(lambda line: self.log(machine.name, line))
+        stderr = LineStream(lambda line: self.log(machine.name, f"! {line}"))
         while not channel.eof_received:
             remaining = deadline - time.monotonic()
             if remaining <= 0:

@@ -6,11 +6,12 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from conftest import make_key_pair
 from cryptography.hazmat.primitives import serialization
 
 from provisioners.ssh import ConnectError, SecretMasker, fingerprint, load_private_key
 from provisioners.ssh.output import LineStream
+
+from .sshd_server import make_key_pair
 
 
 def test_masker_replaces_every_secret_longest_first() -> None:

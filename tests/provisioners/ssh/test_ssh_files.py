@@ -8,9 +8,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from conftest import SshServer
 
 from provisioners.ssh import Machine, SSHError, SSHExecutor
+
+from .sshd_server import SshServer
 
 
 def test_put_bytes_then_get_them_back_with_matching_checksums(

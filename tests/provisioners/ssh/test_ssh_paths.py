@@ -6,7 +6,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from conftest import LogRecorder, SshServer
 
 from provisioners.ssh import (
     ConnectError,
@@ -17,6 +16,8 @@ from provisioners.ssh import (
     SSHExecutor,
     fingerprint,
 )
+
+from .sshd_server import LogRecorder, SshServer
 
 
 def test_host_key_is_recorded_at_first_contact_and_checked_afterwards(

@@ -8,7 +8,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from conftest import LogRecorder, SshServer, free_port, wait_until
 
 from provisioners.ssh import (
     CommandFailed,
@@ -19,6 +18,8 @@ from provisioners.ssh import (
     Machine,
     SSHExecutor,
 )
+
+from .sshd_server import LogRecorder, SshServer, free_port, wait_until
 
 
 def test_run_returns_stdout_stderr_and_exit_code(
@@ -121,8 +122,9 @@ def test_connect_gives_up_at_the_deadline(
 def test_wrong_client_key_is_a_connect_error(
     executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
 ) -> None:
-    from conftest import make_key_pair
     from cryptography.hazmat.primitives import serialization
+
+    from .sshd_server import make_key_pair
 
     stranger = make_key_pair(serialization.PrivateFormat.OpenSSH)
     machine = make_machine(sshd, private_key=stranger.private_pem)
