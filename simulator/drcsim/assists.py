@@ -61,6 +61,15 @@ class Grasps:
         self.controller = controller
         self.held: dict[str, tuple[int, str]] = {}
         self.hose_connected = False
+        if scene.hose is not None:
+            # Hands pass through the hose so that closing on it never knocks it away.
+            hands = [n for n in scene.robot_links if n[2:] in ("hand", "finger", "larm", "ufarm")]
+            self._ignore_collisions(scene.hose, [scene.robot_links[n] for n in hands])
+
+    def _ignore_collisions(self, body: int, robot_links: list[int]) -> None:
+        for robot_link in robot_links:
+            for link in range(-1, self.client.getNumJoints(body)):
+                self.client.setCollisionFilterPair(self.scene.robot, body, robot_link, link, 0)
 
     def palm(self, hand: str) -> tuple[float, float, float]:
         """Return the world position of a hand's grasp point (the hand link's COM)."""
@@ -94,9 +103,7 @@ class Grasps:
             rel_orn,
         )
         self.client.changeConstraint(constraint, maxForce=GRASP_FORCE)
-        for robot_link in self.scene.robot_links.values():
-            for hose_link in range(-1, self.client.getNumJoints(hose)):
-                self.client.setCollisionFilterPair(self.scene.robot, hose, robot_link, hose_link, 0)
+        self._ignore_collisions(hose, list(self.scene.robot_links.values()))
         self.held[hand] = (constraint, "hose")
         return "hose"
 

@@ -46,33 +46,39 @@ class Reach:
         target: list[float],
         tool: bool,
         grasps: Grasps,
+        frame: str = "world",
     ) -> None:
         self.scene, self.controller, self.side = scene, controller, side
         self.target = np.array(target, dtype=float)
+        self.frame = frame
         self.link = scene.robot_links[humanoid.HAND_LINKS[side]]
         self.slots = [controller.slot[name] for name in ARM_JOINTS[side]]
         self.joint_targets = controller.position[self.slots].copy()
-        self.local = [0.0, 0.0, 0.0]
+        client = scene.client
+        # Points are kept in the hand's URDF link frame: calculateJacobian works in that frame.
+        link_state = client.getLinkState(scene.robot, self.link)
+        self.local = list(link_state[2])  # the palm (the hand link's centre of mass)
         self.status = "reaching"
-        held = grasps.holding("hose") == side and tool and scene.hose is not None
-        if held:
-            assert scene.hose is not None
-            client = scene.client
-            hand_pos, hand_orn = client.getLinkState(scene.robot, self.link)[:2]
+        if tool and grasps.holding("hose") == side and scene.hose is not None:
+            frame_pos, frame_orn = link_state[4], link_state[5]
             obj_pos, _ = client.getBasePositionAndOrientation(scene.hose)
-            inv_pos, inv_orn = client.invertTransform(hand_pos, hand_orn)
+            inv_pos, inv_orn = client.invertTransform(frame_pos, frame_orn)
             self.local = list(client.multiplyTransforms(inv_pos, inv_orn, obj_pos, [0, 0, 0, 1])[0])
 
     def point(self) -> np.ndarray:
         """Return the world position of the point being moved."""
         client = self.scene.client
-        pos, orn = client.getLinkState(self.scene.robot, self.link)[:2]
-        return np.array(client.multiplyTransforms(pos, orn, self.local, [0, 0, 0, 1])[0])
+        state = client.getLinkState(self.scene.robot, self.link, computeForwardKinematics=True)
+        return np.array(client.multiplyTransforms(state[4], state[5], self.local, [0, 0, 0, 1])[0])
 
     def update(self) -> None:
         """One IK iteration from the measured error; the joint PIDs do the rest."""
         client, controller = self.scene.client, self.controller
-        error = self.target - self.point()
+        target = self.target
+        if self.frame == "pelvis":
+            pos, orn = client.getBasePositionAndOrientation(self.scene.robot)
+            target = np.array(client.multiplyTransforms(pos, orn, target.tolist(), [0, 0, 0, 1])[0])
+        error = target - self.point()
         self.status = "reached" if np.linalg.norm(error) < REACH_TOLERANCE else "reaching"
         positions = [0.0] * client.getNumJoints(self.scene.robot)
         for slot, index in enumerate(controller.indices):
@@ -81,7 +87,11 @@ class Reach:
         linear, _ = client.calculateJacobian(
             self.scene.robot, self.link, self.local, positions, zeros, zeros
         )
-        jacobian = np.array(linear)
+        # pybullet returns a floating base's Jacobian in the base frame: rotate it to world.
+        _, base_orn = client.getBasePositionAndOrientation(self.scene.robot)
+        jacobian = np.array(client.getMatrixFromQuaternion(base_orn)).reshape(3, 3) @ np.array(
+            linear
+        )
         offset = jacobian.shape[1] - len(positions)  # a floating base adds 6 columns first
         columns = [offset + controller.indices[slot] for slot in self.slots]
         arm = jacobian[:, columns]
@@ -157,6 +167,7 @@ class Behaviours:
                 params["target"],
                 bool(params.get("tool", False)),
                 self.grasps,
+                str(params.get("frame", "world")),
             )
         elif name == "arm_rest":
             self.reaches.pop(params["hand"], None)

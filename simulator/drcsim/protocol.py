@@ -14,13 +14,14 @@ from drcsim.models.humanoid import JOINT_NAMES
 MAX_MESSAGE_BYTES = 64 * 1024
 MAX_STEPS = 10_000
 HANDS = ("left", "right")
+FRAMES = ("world", "pelvis")
 OPS = ("hello", "state", "step", "joints", "behaviour", "stop")
 # Behaviour name -> its parameters and their kinds ("hand", "vec3", "float", "bool", "direction").
 BEHAVIOURS: dict[str, dict[str, str]] = {
     "none": {},
     "stand": {},
     "walk": {"pose": "vec3"},
-    "reach": {"hand": "hand", "target": "vec3", "tool": "bool?"},
+    "reach": {"hand": "hand", "target": "vec3", "tool": "bool?", "frame": "frame?"},
     "arm_rest": {"hand": "hand"},
     "grasp": {"hand": "hand"},
     "release": {"hand": "hand"},
@@ -59,6 +60,10 @@ def _check_param(kind: str, value: Any, where: str) -> Any:
     if kind == "bool":
         if not isinstance(value, bool):
             raise ProtocolError(f"{where} must be true or false")
+        return value
+    if kind == "frame":
+        if value not in FRAMES:
+            raise ProtocolError(f"{where} must be one of {FRAMES}")
         return value
     if value not in DIRECTIONS:
         raise ProtocolError(f"{where} must be one of {sorted(DIRECTIONS)}")

@@ -30,197 +30,59 @@ class JointSpec:
 X: Vec3 = (1.0, 0.0, 0.0)
 Y: Vec3 = (0.0, 1.0, 0.0)
 Z: Vec3 = (0.0, 0.0, 1.0)
+AXES = {"x": X, "y": Y, "z": Z}
 
-
-def _leg(side: str) -> list[JointSpec]:
-    s = 1.0 if side == "l" else -1.0
-    hpz = (-0.174, 0.786) if side == "l" else (-0.786, 0.174)
-    return [
-        JointSpec(
-            f"{side}_leg_hpz",
-            "pelvis",
-            f"{side}_uglut",
-            (0, s * 0.09, -0.05),
-            Z,
-            *hpz,
-            12,
-            275,
-            1500,
-            30,
-        ),
-        JointSpec(
-            f"{side}_leg_hpx",
-            f"{side}_uglut",
-            f"{side}_lglut",
-            (0, 0, 0),
-            X,
-            -0.523,
-            0.523,
-            12,
-            530,
-            3000,
-            60,
-        ),
-        JointSpec(
-            f"{side}_leg_hpy",
-            f"{side}_lglut",
-            f"{side}_uleg",
-            (0, 0, 0),
-            Y,
-            -1.61,
-            0.65,
-            12,
-            840,
-            3000,
-            60,
-        ),
-        JointSpec(
-            f"{side}_leg_kny",
-            f"{side}_uleg",
-            f"{side}_lleg",
-            (0, 0, -0.42),
-            Y,
-            0.0,
-            2.35,
-            12,
-            890,
-            3000,
-            60,
-        ),
-        JointSpec(
-            f"{side}_leg_aky",
-            f"{side}_lleg",
-            f"{side}_talus",
-            (0, 0, -0.42),
-            Y,
-            -1.0,
-            0.7,
-            12,
-            740,
-            1500,
-            30,
-        ),
-        JointSpec(
-            f"{side}_leg_akx",
-            f"{side}_talus",
-            f"{side}_foot",
-            (0, 0, 0),
-            X,
-            -0.8,
-            0.8,
-            12,
-            360,
-            1000,
-            20,
-        ),
-    ]
-
-
-def _arm(side: str) -> list[JointSpec]:
-    s = 1.0 if side == "l" else -1.0
-    shz = (-1.57, 0.79) if side == "l" else (-0.79, 1.57)
-    elx = (0.0, 2.35) if side == "l" else (-2.35, 0.0)
-    return [
-        JointSpec(
-            f"{side}_arm_shz", "utorso", f"{side}_clav", (0, s * 0.2, 0.3), Z, *shz, 12, 87, 400, 10
-        ),
-        JointSpec(
-            f"{side}_arm_shx",
-            f"{side}_clav",
-            f"{side}_scap",
-            (0, s * 0.1, 0),
-            X,
-            -1.57,
-            1.57,
-            12,
-            99,
-            400,
-            10,
-        ),
-        JointSpec(
-            f"{side}_arm_ely",
-            f"{side}_scap",
-            f"{side}_uarm",
-            (0, s * 0.05, 0),
-            Y,
-            -3.14,
-            3.14,
-            12,
-            63,
-            250,
-            6,
-        ),
-        JointSpec(
-            f"{side}_arm_elx",
-            f"{side}_uarm",
-            f"{side}_larm",
-            (0, s * 0.33, 0),
-            X,
-            *elx,
-            12,
-            112,
-            250,
-            6,
-        ),
-        JointSpec(
-            f"{side}_arm_wry",
-            f"{side}_larm",
-            f"{side}_ufarm",
-            (0, s * 0.28, 0),
-            Y,
-            -3.14,
-            3.14,
-            12,
-            25,
-            60,
-            1.5,
-        ),
-        JointSpec(
-            f"{side}_arm_wrx",
-            f"{side}_ufarm",
-            f"{side}_hand",
-            (0, s * 0.03, 0),
-            X,
-            -1.18,
-            1.18,
-            12,
-            25,
-            60,
-            1.5,
-        ),
-    ]
-
-
-BODY_JOINTS: list[JointSpec] = [
-    JointSpec(
-        "back_bkz", "pelvis", "ltorso", (-0.0125, 0, 0.09), Z, -0.663, 0.663, 12, 106, 1500, 40
-    ),
-    JointSpec("back_bky", "ltorso", "mtorso", (0, 0, 0.162), Y, -0.219, 0.538, 9, 445, 3000, 60),
-    JointSpec("back_bkx", "mtorso", "utorso", (0, 0, 0.05), X, -0.523, 0.523, 12, 300, 3000, 60),
-    JointSpec("neck_ry", "utorso", "head", (0.1, 0, 0.55), Y, -0.602, 1.145, 6.28, 25, 80, 2),
-    *_leg("l"),
-    *_leg("r"),
-    *_arm("l"),
-    *_arm("r"),
+# One row per joint of the left side and the trunk (the right side mirrors y and the
+# asymmetric limits): name, parent, child, origin, axis, lower, upper, velocity, effort, kp, kd.
+# Limits and efforts follow Atlas v5.
+_TRUNK = [
+    ("back_bkz", "pelvis", "ltorso", (-0.0125, 0, 0.09), "z", -0.663, 0.663, 12, 106, 1500, 40),
+    ("back_bky", "ltorso", "mtorso", (0, 0, 0.162), "y", -0.219, 0.538, 9, 445, 3000, 60),
+    ("back_bkx", "mtorso", "utorso", (0, 0, 0.05), "x", -0.523, 0.523, 12, 300, 3000, 60),
+    ("neck_ry", "utorso", "head", (0.1, 0, 0.55), "y", -0.602, 1.145, 6.28, 25, 80, 2),
 ]
-
-GRIPPER_JOINTS: list[JointSpec] = [
-    JointSpec(
-        f"{side}_gripper",
-        f"{side}_hand",
-        f"{side}_finger",
-        (0, s * 0.1, -0.04),
-        Z,
-        0.0,
-        0.04,
-        0.2,
-        60,
-        2000,
-        20,
-    )
-    for side, s in (("l", 1.0), ("r", -1.0))
+_LEFT_LIMBS = [
+    ("l_leg_hpz", "pelvis", "l_uglut", (0, 0.09, -0.05), "z", -0.174, 0.786, 12, 275, 1500, 30),
+    ("l_leg_hpx", "l_uglut", "l_lglut", (0, 0, 0), "x", -0.523, 0.523, 12, 530, 3000, 60),
+    ("l_leg_hpy", "l_lglut", "l_uleg", (0, 0, 0), "y", -1.61, 0.65, 12, 840, 3000, 60),
+    ("l_leg_kny", "l_uleg", "l_lleg", (0, 0, -0.42), "y", 0.0, 2.35, 12, 890, 3000, 60),
+    ("l_leg_aky", "l_lleg", "l_talus", (0, 0, -0.42), "y", -1.0, 0.7, 12, 740, 1500, 30),
+    ("l_leg_akx", "l_talus", "l_foot", (0, 0, 0), "x", -0.8, 0.8, 12, 360, 1000, 20),
+    ("l_arm_shz", "utorso", "l_clav", (0, 0.2, 0.3), "z", -1.57, 0.79, 12, 87, 1000, 40),
+    ("l_arm_shx", "l_clav", "l_scap", (0, 0.1, 0), "x", -1.57, 1.57, 12, 99, 1000, 40),
+    ("l_arm_ely", "l_scap", "l_uarm", (0, 0.05, 0), "y", -3.14, 3.14, 12, 63, 600, 20),
+    ("l_arm_elx", "l_uarm", "l_larm", (0, 0.33, 0), "x", 0.0, 2.35, 12, 112, 600, 20),
+    ("l_arm_wry", "l_larm", "l_ufarm", (0, 0.28, 0), "y", -3.14, 3.14, 12, 25, 150, 3),
+    ("l_arm_wrx", "l_ufarm", "l_hand", (0, 0.03, 0), "x", -1.18, 1.18, 12, 25, 150, 3),
+    ("l_gripper", "l_hand", "l_finger", (0, 0.1, -0.04), "z", 0.0, 0.04, 0.2, 60, 2000, 20),
 ]
+# Joints whose limits are not symmetric about zero swap and negate them on the right side.
+_MIRRORED_LIMITS = ("l_leg_hpz", "l_arm_shz", "l_arm_elx")
 
+
+def _spec(row: tuple) -> JointSpec:  # type: ignore[type-arg]
+    name, parent, child, xyz, axis, lower, upper, velocity, effort, kp, kd = row
+    return JointSpec(name, parent, child, xyz, AXES[axis], lower, upper, velocity, effort, kp, kd)
+
+
+def _right(row: tuple) -> tuple:  # type: ignore[type-arg]
+    name, parent, child, xyz, axis, lower, upper, *rest = row
+    if name in _MIRRORED_LIMITS:
+        lower, upper = -upper, -lower
+
+    def flip(link: str) -> str:
+        return "r_" + link[2:] if link.startswith("l_") else link
+
+    return (flip(name), flip(parent), flip(child), (xyz[0], -xyz[1], xyz[2]), axis, lower, upper,
+            *rest)  # fmt: skip
+
+
+_ROWS = _TRUNK + [r for r in _LEFT_LIMBS if "_leg_" in r[0]]
+_ROWS += [_right(r) for r in _LEFT_LIMBS if "_leg_" in r[0]]
+_ROWS += [r for r in _LEFT_LIMBS if "_arm_" in r[0]]
+_ROWS += [_right(r) for r in _LEFT_LIMBS if "_arm_" in r[0]]
+BODY_JOINTS: list[JointSpec] = [_spec(row) for row in _ROWS]
+GRIPPER_JOINTS: list[JointSpec] = [_spec(_LEFT_LIMBS[-1]), _spec(_right(_LEFT_LIMBS[-1]))]
 ALL_JOINTS: list[JointSpec] = BODY_JOINTS + GRIPPER_JOINTS
 JOINT_NAMES: list[str] = [spec.name for spec in ALL_JOINTS]
 HAND_LINKS = {"left": "l_hand", "right": "r_hand"}
@@ -256,7 +118,7 @@ SIT_POSTURE: dict[str, float] = {
 STAND_PELVIS_HEIGHT = 0.05 + 2 * 0.42 * math.cos(0.3) + 0.085
 GRASP_POINT_IN_HAND: Vec3 = (0.0, 0.12, 0.0)
 
-# Link masses (kg), following Atlas v5's distribution; 157 kg in all.
+# Link masses (kg), after Atlas v5's distribution (lighter arms); about 145 kg in all.
 _MASSES = {
     "pelvis": 17.9,
     "ltorso": 2.4,
@@ -269,12 +131,12 @@ _MASSES = {
     "lleg": 5.5,
     "talus": 0.13,
     "foot": 2.4,
-    "clav": 4.5,
-    "scap": 3.9,
-    "uarm": 2.4,
-    "larm": 3.4,
-    "ufarm": 2.3,
-    "hand": 2.1,
+    "clav": 3.0,
+    "scap": 2.5,
+    "uarm": 2.0,
+    "larm": 1.8,
+    "ufarm": 0.8,
+    "hand": 1.2,
     "finger": 0.2,
 }
 DARK = (0.2, 0.2, 0.25, 1.0)

@@ -12,7 +12,8 @@ TABLE_HEIGHT = 1.0
 HOSE_SEGMENTS = 3
 HOSE_SEGMENT_LENGTH = 0.25
 # Standpipe geometry in its own frame (the robot faces it from -x).
-INLET_XYZ: Vec3 = (-0.2, 0.0, 1.15)
+# The inlet point lies just beyond the stub (x -0.07..-0.21), where a coupler can reach it.
+INLET_XYZ: Vec3 = (-0.3, 0.0, 1.15)
 INLET_AXIS: Vec3 = (-1.0, 0.0, 0.0)
 VALVE_XYZ: Vec3 = (-0.12, -0.35, 1.3)
 VALVE_RADIUS = 0.12
@@ -102,9 +103,7 @@ def build_standpipe() -> Robot:
         0.0,
         [
             cylinder(0.07, 1.4, xyz=(0, 0, 0.7)),
-            cylinder(
-                0.05, 0.14, xyz=(INLET_XYZ[0] / 2 - 0.04, 0, INLET_XYZ[2]), rpy=(0, HALF_PI, 0)
-            ),
+            cylinder(0.05, 0.14, xyz=(-0.14, 0, INLET_XYZ[2]), rpy=(0, HALF_PI, 0)),
             box(0.05, 0.4, 0.05, xyz=(-0.05, -0.2, VALVE_XYZ[2])),
         ],
         rgba=STEEL,
