@@ -59,7 +59,7 @@ class GroupError(SSHError):
 
     def __init__(self, results: Mapping[str, object]) -> None:
         self.results = dict(results)
-        failed = sorted(name for name, outcome in self.results.items() if _is_failure(outcome))
+        failed = sorted(self.failures)
         super().__init__(
             f"{len(failed)} of {len(self.results)} machines failed: "
             + "; ".join(f"{name}: {self.results[name]}" for name in failed)
@@ -82,7 +82,3 @@ class GroupError(SSHError):
             for name, outcome in self.results.items()
             if not isinstance(outcome, BaseException)
         }
-
-
-def _is_failure(outcome: object) -> bool:
-    return isinstance(outcome, BaseException)

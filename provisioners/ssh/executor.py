@@ -110,7 +110,7 @@ class SSHExecutor:
         self.log(machine.name, f"put {label} -> {remote_path} (mode {mode:04o})")
         digest, size = hashlib.sha256(), 0
         connection = self._pool.get(machine)
-        with self._pool.machine_lock(machine):
+        with self._pool.sftp_lock(machine):
             sftp = connection.sftp()
             try:
                 with sftp.open(partial, "wb") as remote_file:
@@ -133,7 +133,7 @@ class SSHExecutor:
         self.log(machine.name, f"get {remote_path} -> {local}")
         digest, size = hashlib.sha256(), 0
         connection = self._pool.get(machine)
-        with self._pool.machine_lock(machine):
+        with self._pool.sftp_lock(machine):
             sftp = connection.sftp()
             try:
                 with sftp.open(remote_path, "rb") as remote_file, partial.open("wb") as out:

@@ -9,6 +9,8 @@ from collections.abc import Sequence
 
 import paramiko
 
+from provisioners.ssh.errors import ConnectError
+
 # a proxy that ignores SIGTERM gets this long before SIGKILL
 _STOP_GRACE_SECONDS = 2.0
 
@@ -19,14 +21,18 @@ class ArgvProxyCommand(paramiko.ProxyCommand):
     def __init__(self, argv: Sequence[str]) -> None:
         # paramiko's own __init__ re-splits a string and leaves stderr on an unread pipe
         self.cmd = list(argv)
-        self.process = subprocess.Popen(
-            self.cmd,
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL,
-            bufsize=0,
-            start_new_session=True,
-        )
+        try:
+            self.process = subprocess.Popen(
+                self.cmd,
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+                bufsize=0,
+                start_new_session=True,
+            )
+        except OSError as exc:
+            # a missing proxy program will not appear by retrying: fail at once
+            raise ConnectError(f"proxy command {self.cmd[0]!r} cannot start: {exc}") from exc
         self.timeout: float | None = None
 
     def recv(self, size: int) -> bytes:

@@ -86,6 +86,19 @@ def test_failing_proxy_command_is_retried_then_a_connect_error(
     assert "'unreachable'" in str(error.value)
 
 
+def test_missing_proxy_program_fails_at_once(
+    host_keys: InMemoryHostKeyStore, sshd: SshServer, make_machine: Callable[..., Machine]
+) -> None:
+    machine = make_machine(sshd, name="nshost", proxy_command=["/nonexistent/cloudsim-proxy"])
+    patient = ConnectPolicy(deadline=600.0)  # would take ten minutes if it were retried
+    with (
+        SSHExecutor(host_keys, connect_policy=patient) as ssh,
+        pytest.raises(ConnectError) as error,
+    ):
+        ssh.run(machine, "true")
+    assert "proxy command '/nonexistent/cloudsim-proxy' cannot start" in str(error.value)
+
+
 def test_jump_machine_forwards_to_a_private_machine(
     executor: SSHExecutor,
     sshd_factory: Callable[..., SshServer],

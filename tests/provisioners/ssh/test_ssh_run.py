@@ -42,6 +42,15 @@ def test_nonzero_exit_raises_command_failed_with_the_result(
     assert "exited 7" in str(failure.value) and "doomed" in str(failure.value)
 
 
+def test_command_failed_message_masks_secrets(
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+) -> None:
+    with pytest.raises(CommandFailed) as failure:
+        executor.run(make_machine(sshd), "echo token s3cret-token-value refused >&2; exit 1")
+    assert "s3cret-token-value" not in str(failure.value)
+    assert "token *** refused" in str(failure.value)
+
+
 def test_sudo_runs_the_command_as_root(
     executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
 ) -> None:
