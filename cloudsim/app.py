@@ -10,6 +10,7 @@ from typing import Any
 from flask import Flask
 from sqlalchemy import event
 
+from cloudsim.auth.passwords import Passwords
 from cloudsim.config import Config
 from cloudsim.crypto import Keyring
 from cloudsim.extensions import csrf, db, limiter, login_manager
@@ -47,6 +48,9 @@ def create_app(config: Config | None = None) -> Flask:
     )
     logging.getLogger("cloudsim").setLevel(config.log_level)
     app.extensions["cloudsim.keyring"] = Keyring(config.encryption_keys)
+    app.extensions["cloudsim.passwords"] = Passwords(
+        config.argon2_time_cost, config.argon2_memory_kib
+    )
 
     db.init_app(app)
     if config.database_url.startswith("sqlite"):

@@ -75,6 +75,8 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_STALE_JOB_SECONDS": Setting(
         "300", "A job queued this long without starting is sent to the queue again"
     ),
+    "CLOUDSIM_ARGON2_TIME_COST": Setting("3", "Argon2id passes when hashing a password"),
+    "CLOUDSIM_ARGON2_MEMORY_KIB": Setting("65536", "Argon2id memory per password hash, KiB"),
     "CLOUDSIM_LOG_LEVEL": Setting("INFO", "Log level of the web server and workers"),
 }
 
@@ -100,6 +102,8 @@ class Config:
     job_visibility_timeout: int
     job_lease_seconds: int
     stale_job_seconds: int
+    argon2_time_cost: int
+    argon2_memory_kib: int
     log_level: str
     testing: bool = False
 
@@ -166,6 +170,8 @@ class Config:
             job_visibility_timeout=number("CLOUDSIM_JOB_VISIBILITY_TIMEOUT"),
             job_lease_seconds=number("CLOUDSIM_JOB_LEASE_SECONDS"),
             stale_job_seconds=number("CLOUDSIM_STALE_JOB_SECONDS"),
+            argon2_time_cost=number("CLOUDSIM_ARGON2_TIME_COST"),
+            argon2_memory_kib=number("CLOUDSIM_ARGON2_MEMORY_KIB"),
             log_level=get("CLOUDSIM_LOG_LEVEL").upper(),
         )
         values.update(overrides)

@@ -5,12 +5,13 @@ from __future__ import annotations
 from typing import Any
 
 from flask.views import MethodView
+from flask_smorest import Blueprint
 
-from cloudsim.api.common import ApiBlueprint, caller
+from cloudsim.api.common import caller, columns
 from cloudsim.api.schemas import IssuedTokenSchema, TokenSchema, UserSchema
 from cloudsim.auth.tokens import issue_token, revoke_token
 
-blp = ApiBlueprint("api_account", __name__, description="The caller's account and API tokens")
+blp = Blueprint("api_account", __name__, description="The caller's account and API tokens")
 
 
 @blp.route("/me")
@@ -33,9 +34,7 @@ class Tokens(MethodView):
     def post(self, data: dict[str, Any]) -> Any:
         """Create a token; its value is in this answer only."""
         issued = issue_token(caller(), data["name"])
-        result = IssuedTokenSchema().dump(issued.token)
-        result["token"] = issued.plaintext
-        return result
+        return {**columns(issued.token), "token": issued.plaintext}
 
 
 @blp.route("/tokens/<int:token_id>")

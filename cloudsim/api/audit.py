@@ -5,13 +5,14 @@ from __future__ import annotations
 from typing import Any
 
 from flask.views import MethodView
+from flask_smorest import Blueprint
 
-from cloudsim.api.common import ApiBlueprint, SelectPage, caller_with
+from cloudsim.api.common import SelectPage, caller_with
 from cloudsim.api.schemas import AuditEventSchema, AuditQuerySchema
 from cloudsim.audit.service import visible_events
 from cloudsim.models import Role
 
-blp = ApiBlueprint("api_audit", __name__, description="Who did what")
+blp = Blueprint("api_audit", __name__, description="Who did what")
 
 
 @blp.route("/audit")

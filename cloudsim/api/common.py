@@ -1,28 +1,16 @@
-"""What every API module shares: the caller, the blueprint class, paging of queries."""
+"""What every API module shares: the caller, row serialisation, paging of queries."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from flask import g
-from flask_smorest import Blueprint, Page
+from flask_smorest import Page
 from sqlalchemy import Select, func, select
-from webargs.flaskparser import FlaskParser
 
 from cloudsim.auth.policy import require_role
 from cloudsim.extensions import db
 from cloudsim.models import Role, User
-
-
-class _Parser(FlaskParser):
-    # Bad input is a 400 with the field errors, like every other bad request.
-    DEFAULT_VALIDATION_STATUS = 400
-
-
-class ApiBlueprint(Blueprint):
-    """A flask-smorest blueprint whose validation errors answer 400."""
-
-    ARGUMENTS_PARSER = _Parser()
 
 
 def caller() -> User:
@@ -35,6 +23,11 @@ def caller_with(role: Role, action: str) -> User:
     user = caller()
     require_role(user, role, action)
     return user
+
+
+def columns(row: object) -> dict[str, Any]:
+    """Return a row's column values, for answers that add a field the model does not have."""
+    return {c.key: getattr(row, c.key) for c in row.__table__.columns}  # type: ignore[attr-defined]
 
 
 class SelectPage(Page):  # type: ignore[misc]

@@ -5,13 +5,14 @@ from __future__ import annotations
 from typing import Any
 
 from flask.views import MethodView
+from flask_smorest import Blueprint
 from sqlalchemy import select
 
-from cloudsim.api.common import ApiBlueprint, SelectPage, caller
+from cloudsim.api.common import SelectPage, caller
 from cloudsim.api.schemas import ConstellationSchema
 from cloudsim.models import Constellation, Role
 
-blp = ApiBlueprint("api_constellations", __name__, description="Constellations and machines")
+blp = Blueprint("api_constellations", __name__, description="Constellations and machines")
 
 
 @blp.route("/constellations")

@@ -5,13 +5,14 @@ from __future__ import annotations
 from typing import Any
 
 from flask.views import MethodView
+from flask_smorest import Blueprint
 
-from cloudsim.api.common import ApiBlueprint, SelectPage, caller_with
+from cloudsim.api.common import SelectPage, caller_with
 from cloudsim.api.schemas import JobDetailSchema, JobQuerySchema, JobSchema
 from cloudsim.jobs.service import enqueue, get_job, visible_jobs
 from cloudsim.models import Role
 
-blp = ApiBlueprint("api_jobs", __name__, description="Background jobs and their progress")
+blp = Blueprint("api_jobs", __name__, description="Background jobs and their progress")
 
 
 @blp.route("/jobs")

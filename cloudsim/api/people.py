@@ -5,8 +5,9 @@ from __future__ import annotations
 from typing import Any
 
 from flask.views import MethodView
+from flask_smorest import Blueprint
 
-from cloudsim.api.common import ApiBlueprint, caller, caller_with
+from cloudsim.api.common import caller, caller_with, columns
 from cloudsim.api.schemas import (
     TeamSchema,
     UserCreatedSchema,
@@ -17,7 +18,7 @@ from cloudsim.api.schemas import (
 from cloudsim.models import Role
 from cloudsim.people import service
 
-blp = ApiBlueprint("api_people", __name__, description="Teams and users")
+blp = Blueprint("api_people", __name__, description="Teams and users")
 
 
 @blp.route("/teams")
@@ -65,9 +66,7 @@ class Users(MethodView):
     def post(self, data: dict[str, Any]) -> Any:
         """Create a user; without a password CloudSim generates one and returns it once."""
         created = service.create_user(caller(), **data)
-        result = UserCreatedSchema().dump(created.user)
-        result["generated_password"] = created.generated_password
-        return result
+        return {**columns(created.user), "generated_password": created.generated_password}
 
 
 @blp.route("/users/<int:user_id>")

@@ -10,6 +10,7 @@ from flask import abort
 from flask_login import current_user
 
 from cloudsim.errors import Forbidden, NotFound
+from cloudsim.extensions import login_manager
 from cloudsim.models import Role, User
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -36,7 +37,7 @@ def role_required(role: Role) -> Callable[[F], F]:
         @wraps(view)
         def wrapped(*args: Any, **kwargs: Any) -> Any:
             if not current_user.is_authenticated:
-                abort(401)
+                return login_manager.unauthorized()
             if not current_user.has_role(role):
                 abort(403)
             return view(*args, **kwargs)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from flask_wtf import FlaskForm
-from wtforms import BooleanField, PasswordField, SelectField, StringField
+from wtforms import BooleanField, PasswordField, SelectChoice, SelectField, StringField
 from wtforms.validators import DataRequired, Length, Optional
 
 from cloudsim.models import Role, Team
@@ -22,7 +22,7 @@ class UserForm(FlaskForm):
 
     email = StringField("E-mail", validators=[DataRequired(), Length(max=254)])
     name = StringField("Name", validators=[Optional(), Length(max=120)])
-    role = SelectField("Role", choices=[(r.value, r.value) for r in Role])
+    role = SelectField("Role", choices=[SelectChoice(r.value) for r in Role])
     team = SelectField("Team", choices=[])
     password = PasswordField(
         "Password (leave empty to generate one)", validators=[Optional(), Length(min=10, max=256)]
@@ -31,11 +31,11 @@ class UserForm(FlaskForm):
 
     def offer(self, teams: list[Team], can_manage_staff: bool) -> UserForm:
         """Fill the choices with the teams and the roles this actor may assign."""
-        self.team.choices = [(NO_TEAM, "— none (officers and admins) —")] + [
-            (str(t.id), t.name) for t in teams
+        self.team.choices = [SelectChoice(NO_TEAM, "— none (officers and admins) —")] + [
+            SelectChoice(str(t.id), t.name) for t in teams
         ]
         if not can_manage_staff:
-            self.role.choices = [(Role.USER.value, Role.USER.value)]
+            self.role.choices = [SelectChoice(Role.USER.value)]
         return self
 
     def team_id(self) -> int | None:

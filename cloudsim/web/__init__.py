@@ -51,7 +51,8 @@ def register_web(app: Flask) -> None:
 
     @app.errorhandler(HTTPException)
     def http_error(exc: HTTPException) -> ResponseReturnValue:
-        code = exc.code or 500
+        # webargs answers 422 for invalid fields; to callers it is a plain bad request.
+        code = 400 if exc.code == 422 else exc.code or 500
         # Validation errors of the API carry the message of every bad field.
         fields = (getattr(exc, "data", None) or {}).get("messages")
         message = "invalid input" if fields else MESSAGES.get(code, exc.description or "")

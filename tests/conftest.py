@@ -1,0 +1,154 @@
+"""Fixtures shared by the whole suite: private Redis and PostgreSQL, apps, people, clients."""
+
+from __future__ import annotations
+
+import contextvars
+import itertools
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import redis
+from cryptography.fernet import Fernet
+from flask import Flask
+from flask.testing import FlaskClient
+
+from cloudsim.app import create_app
+from cloudsim.auth.tokens import issue_token
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.models import Role, Team, User
+from cloudsim.people import service
+from tests.support.servers import PostgresServer, RedisServer
+
+PASSWORD = "correct horse battery"
+_names = itertools.count(1)
+
+
+@pytest.fixture(scope="session")
+def redis_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RedisServer]:
+    server = RedisServer(tmp_path_factory.mktemp("redis"))
+    yield server
+    server.stop()
+
+
+@pytest.fixture(scope="session")
+def postgres_server() -> Iterator[PostgresServer]:
+    server = PostgresServer()
+    yield server
+    server.stop()
+
+
+@pytest.fixture(scope="session")
+def encryption_key() -> str:
+    return Fernet.generate_key().decode()
+
+
+@pytest.fixture
+def make_config(
+    tmp_path: Path, redis_server: RedisServer, encryption_key: str
+) -> Callable[..., Config]:
+    """Build a test Config: its own instance folder, the session's Redis (flushed)."""
+
+    def build(database_url: str | None = None, **overrides: object) -> Config:
+        url = redis_server.url(0)
+        redis.Redis.from_url(url).flushdb()
+        env = {
+            "CLOUDSIM_INSTANCE_DIR": str(tmp_path / "instance"),
+            "CLOUDSIM_REDIS_URL": url,
+            "CLOUDSIM_ENCRYPTION_KEYS": encryption_key,
+            "CLOUDSIM_SECRET_KEY": "test-secret-key",
+            "CLOUDSIM_LOG_LEVEL": "WARNING",
+            # Cheap hashes keep the suite fast; production keeps Argon2id's strong defaults.
+            "CLOUDSIM_ARGON2_TIME_COST": "1",
+            "CLOUDSIM_ARGON2_MEMORY_KIB": "1024",
+        }
+        if database_url:
+            env["CLOUDSIM_DATABASE_URL"] = database_url
+        return Config.from_env(env, testing=True, **overrides)
+
+    return build
+
+
+class IsolatedClient(FlaskClient):
+    """A test client whose requests never share the test's app context (nor its `g`, nor its
+    database session), exactly as in production where every request gets its own."""
+
+    def open(self, *args: Any, **kwargs: Any) -> Any:
+        return contextvars.Context().run(super().open, *args, **kwargs)
+
+
+def _app(config: Config) -> Iterator[Flask]:
+    app = create_app(config)
+    app.test_client_class = IsolatedClient
+    with app.app_context():
+        db.create_all()
+        yield app
+        db.session.remove()
+        db.drop_all()
+        db.engine.dispose()
+
+
+@pytest.fixture
+def app(make_config: Callable[..., Config]) -> Iterator[Flask]:
+    """An app on a fresh SQLite database, inside its app context."""
+    yield from _app(make_config())
+
+
+@pytest.fixture(params=["sqlite", "postgres"])
+def any_db_app(
+    request: pytest.FixtureRequest, make_config: Callable[..., Config]
+) -> Iterator[Flask]:
+    """The same test on SQLite and on the private PostgreSQL."""
+    url = None
+    if request.param == "postgres":
+        server: PostgresServer = request.getfixturevalue("postgres_server")
+        url = server.create_database(f"cloudsim_{next(_names)}")
+    yield from _app(make_config(url))
+
+
+@pytest.fixture
+def team_a(app: Flask) -> Team:
+    return service.create_team(None, "Team A")
+
+
+@pytest.fixture
+def team_b(app: Flask) -> Team:
+    return service.create_team(None, "Team B")
+
+
+def make_user(role: Role, team: Team | None = None, email: str | None = None) -> User:
+    """Create a user with the shared test password."""
+    email = email or f"{role.value}{next(_names)}@example.org"
+    return service.create_user(
+        None, email=email, role=role, team_id=team.id if team else None, password=PASSWORD
+    ).user
+
+
+@pytest.fixture
+def people(app: Flask, team_a: Team, team_b: Team) -> dict[str, User | None]:
+    """One person of each kind the authorization rules distinguish."""
+    return {
+        "anon": None,
+        "user_a": make_user(Role.USER, team_a),
+        "user_b": make_user(Role.USER, team_b),
+        "officer": make_user(Role.OFFICER),
+        "admin": make_user(Role.ADMIN),
+    }
+
+
+@pytest.fixture
+def client(app: Flask) -> FlaskClient:
+    return app.test_client()
+
+
+def log_in(client: FlaskClient, user: User) -> None:
+    """Log a test client in through the real login form (CSRF disabled by the caller)."""
+    response = client.post("/login", data={"email": user.email, "password": PASSWORD})
+    assert response.status_code == 302, response.get_data(as_text=True)
+
+
+def token_for(user: User) -> dict[str, str]:
+    """Return API headers carrying a fresh token of the user."""
+    return {"Authorization": f"Bearer {issue_token(user, 'tests').plaintext}"}

@@ -1,0 +1,1 @@
+"""Helpers for the test harness: private servers, network ports, waiting."""

@@ -1,0 +1,158 @@
+"""Every route, visited as every kind of person, answers exactly as the rules say.
+
+A new route without an entry here fails the test: decide who may use it, then add it.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+from flask import Flask
+
+from cloudsim.auth.tokens import issue_token
+from cloudsim.extensions import db
+from cloudsim.jobs.service import enqueue
+from cloudsim.models import Role, Team, User
+from tests.conftest import log_in, make_user, token_for
+
+PERSONAS = ("anon", "user_a", "user_b", "officer", "admin")
+_seq = itertools.count(1)
+
+# (endpoint, method) -> expected status per persona, in PERSONAS order.
+LOGIN = 302  # a web page sends anonymous visitors to the login form
+MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
+    # web: auth
+    ("auth.login", "GET"): (200, 302, 302, 302, 302),
+    ("auth.login", "POST"): (400, 302, 302, 302, 302),
+    ("auth.logout", "POST"): (LOGIN, 302, 302, 302, 302),
+    ("auth.account", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("auth.change_password", "POST"): (LOGIN, 400, 400, 400, 400),
+    ("auth.create_token", "POST"): (LOGIN, 400, 400, 400, 400),
+    ("auth.revoke", "POST"): (LOGIN, 302, 404, 404, 404),  # only user_a's own token
+    # web: dashboard, people
+    ("dashboard.index", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("people.teams", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("people.create_team", "POST"): (LOGIN, 403, 403, 400, 400),
+    ("people.team", "GET"): (LOGIN, 200, 404, 200, 200),  # team A's page
+    ("people.rename_team", "POST"): (LOGIN, 403, 403, 400, 400),
+    ("people.delete_team", "POST"): (LOGIN, 403, 403, 409, 409),  # team A has members
+    ("people.users", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("people.create_user", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("people.create_user", "POST"): (LOGIN, 403, 403, 400, 400),
+    ("people.edit_user", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("people.edit_user", "POST"): (LOGIN, 403, 403, 400, 400),
+    ("people.delete_user", "POST"): (LOGIN, 403, 403, 302, 302),
+    # web: jobs, audit
+    ("jobs.index", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("jobs.start_diagnostics", "POST"): (LOGIN, 403, 403, 403, 302),
+    ("jobs.show", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("jobs.progress", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("audit.index", "GET"): (LOGIN, 403, 403, 200, 200),
+    # API
+    ("api-docs.openapi_json", "GET"): (200, 200, 200, 200, 200),
+    ("api_account.Me", "GET"): (401, 200, 200, 200, 200),
+    ("api_account.Tokens", "GET"): (401, 200, 200, 200, 200),
+    ("api_account.Tokens", "POST"): (401, 201, 201, 201, 201),
+    ("api_account.TokenById", "DELETE"): (401, 204, 404, 404, 404),
+    ("api_people.Teams", "GET"): (401, 200, 200, 200, 200),
+    ("api_people.Teams", "POST"): (401, 403, 403, 201, 201),
+    ("api_people.TeamById", "GET"): (401, 200, 404, 200, 200),
+    ("api_people.TeamById", "PATCH"): (401, 403, 403, 200, 200),
+    ("api_people.TeamById", "DELETE"): (401, 403, 403, 409, 409),
+    ("api_people.Users", "GET"): (401, 403, 403, 200, 200),
+    ("api_people.Users", "POST"): (401, 403, 403, 201, 201),
+    ("api_people.UserById", "GET"): (401, 404, 404, 200, 200),
+    ("api_people.UserById", "PATCH"): (401, 404, 404, 200, 200),
+    ("api_people.UserById", "DELETE"): (401, 404, 404, 204, 204),
+    ("api_jobs.Jobs", "GET"): (401, 403, 403, 200, 200),
+    ("api_jobs.Jobs", "POST"): (401, 403, 403, 403, 202),
+    ("api_jobs.JobById", "GET"): (401, 403, 403, 200, 200),
+    ("api_audit.Audit", "GET"): (401, 403, 403, 200, 200),
+    ("api_constellations.Constellations", "GET"): (401, 200, 200, 200, 200),
+}
+
+IGNORED_ENDPOINTS = {"static"}
+LOGOUT = ("auth.logout", "POST")
+
+
+def _bodies(team_id: int) -> dict[tuple[str, str], Callable[[], dict[str, Any]]]:
+    """Valid JSON bodies, so that the API's answers show authorization, not validation."""
+    return {
+        ("api_account.Tokens", "POST"): lambda: {"name": "matrix"},
+        ("api_people.Teams", "POST"): lambda: {"name": f"Matrix {next(_seq)}"},
+        ("api_people.TeamById", "PATCH"): lambda: {"name": "Team A"},
+        ("api_people.Users", "POST"): lambda: {
+            "email": f"m{next(_seq)}@example.org",
+            "team_id": team_id,
+        },
+        ("api_people.UserById", "PATCH"): lambda: {"name": "Renamed"},
+        ("api_jobs.Jobs", "POST"): lambda: {"kind": "diagnostics"},
+    }
+
+
+def _routes(app: Flask) -> set[tuple[str, str]]:
+    return {
+        (rule.endpoint, method)
+        for rule in app.url_map.iter_rules()
+        if rule.endpoint not in IGNORED_ENDPOINTS
+        for method in rule.methods - {"HEAD", "OPTIONS"}  # type: ignore[operator]
+    }
+
+
+def test_every_route_is_in_the_matrix(app: Flask) -> None:
+    routes = _routes(app)
+    missing = sorted(routes - MATRIX.keys())
+    stale = sorted(MATRIX.keys() - routes)
+    assert not missing, f"routes without an authorization entry: {missing}"
+    assert not stale, f"matrix entries for routes that no longer exist: {stale}"
+
+
+def _url(app: Flask, endpoint: str, team_a: Team, user_a: User, job_id: str) -> str:
+    """Build the URL, pointing every id at something of team A (fresh where it gets deleted)."""
+    rule = next(r for r in app.url_map.iter_rules() if r.endpoint == endpoint)
+    values: dict[str, Any] = {}
+    if "team_id" in rule.arguments:
+        values["team_id"] = team_a.id
+    if "user_id" in rule.arguments:
+        values["user_id"] = make_user(Role.USER, team_a).id
+    if "token_id" in rule.arguments:
+        values["token_id"] = issue_token(user_a, "victim").token.id
+    if "job_id" in rule.arguments:
+        values["job_id"] = job_id
+    with app.test_request_context():
+        from flask import url_for
+
+        return url_for(endpoint, **values)
+
+
+@pytest.mark.parametrize("persona", PERSONAS)
+def test_route_answers_match_the_matrix(
+    app: Flask, people: dict[str, User | None], persona: str
+) -> None:
+    app.config["WTF_CSRF_ENABLED"] = False
+    team_a = people["user_a"].team  # type: ignore[union-attr]
+    job_id = enqueue("diagnostics", None, team_id=team_a.id).id
+    user = people[persona]
+    bodies = _bodies(team_a.id)
+    headers = token_for(user) if user is not None else {}
+    wrong = []
+    client = app.test_client()
+    if user is not None:
+        log_in(client, user)
+    # Logging out ends the session the other visits use: visit it last.
+    for (endpoint, method), expected in sorted(MATRIX.items(), key=lambda i: i[0] == LOGOUT):
+        url = _url(app, endpoint, team_a, people["user_a"], job_id)  # type: ignore[arg-type]
+        api = url.startswith("/api/")
+        body = bodies.get((endpoint, method), lambda: {})()
+        if api:
+            response = client.open(url, method=method, json=body, headers=headers)
+        else:
+            response = client.open(url, method=method, data=body)
+        status = expected[PERSONAS.index(persona)]
+        if response.status_code != status:
+            wrong.append(f"{method} {url}: {response.status_code}, expected {status}")
+        db.session.rollback()
+    assert not wrong, f"{persona}:\n" + "\n".join(wrong)
