@@ -90,6 +90,8 @@ class SSHExecutor:
         channel = self._open_session(machine)
         try:
             channel.exec_command(remote)
+            # like `ssh -n`: a command that reads stdin gets EOF instead of hanging to its timeout
+            channel.shutdown_write()
             result = self._collect(machine, channel, command, started, timeout)
         finally:
             channel.close()
@@ -137,7 +139,8 @@ class SSHExecutor:
             sftp = connection.sftp()
             try:
                 with sftp.open(remote_path, "rb") as remote_file, partial.open("wb") as out:
-                    remote_file.prefetch()
+                    # bounded read-ahead: fast on high-latency links, small in memory
+                    remote_file.prefetch(max_concurrent_requests=64)
                     while chunk := remote_file.read(_CHUNK):
                         out.write(chunk)
                         digest.update(chunk)

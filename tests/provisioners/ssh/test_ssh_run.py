@@ -32,6 +32,13 @@ def test_run_returns_stdout_stderr_and_exit_code(
     assert executor.run(machine, "id -un").stdout == "root\n"
 
 
+def test_command_reading_stdin_gets_end_of_file(
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+) -> None:
+    result = executor.run(make_machine(sshd), "cat; echo after-eof", timeout=20)
+    assert result.stdout == "after-eof\n"
+
+
 def test_nonzero_exit_raises_command_failed_with_the_result(
     executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
 ) -> None:
