@@ -122,10 +122,12 @@ def _upload(executor: SSHExecutor, machine: Machine, upload: Upload, *, sudo: bo
     executor.put_file(machine, upload.content, staging, mode=upload.mode)
     quoted_staging = shlex.quote(staging)
     finish = [f"mv -f {quoted_staging} {shlex.quote(upload.destination)}"]
-    if upload.owner is not None or upload.group is not None:
-        finish.insert(
-            0, f"chown {shlex.quote(chown_spec(upload.owner, upload.group))} {quoted_staging}"
-        )
+    owner, group = upload.owner, upload.group
+    if sudo and owner is None and group is None:
+        # the staged file belongs to the login user; what sudo installs belongs to root
+        owner, group = "root", "root"
+    if owner is not None or group is not None:
+        finish.insert(0, f"chown {shlex.quote(chown_spec(owner, group))} {quoted_staging}")
     command = " && ".join(finish)
     try:
         executor.run(machine, command, sudo=sudo, timeout=COMMAND_TIMEOUT_SECONDS)

@@ -84,9 +84,11 @@ def test_template_is_rendered_and_uploaded_via_sudo_staging(
     result = apply(executor, machine, operation, sudo=True)
     assert result.changed
     assert path.read_text().startswith("CloudSim constellation vrc-7: machine sim (simulator)\n")
-    staging = re.search(r"mv -f (/tmp/\.cloudsim-upload-[0-9a-f]+) ", result.commands[1])
+    staging = re.fullmatch(
+        r"chown root:root (/tmp/\.cloudsim-upload-[0-9a-f]+) && mv -f \1 \S+", result.commands[1]
+    )
     assert staging is not None and not Path(staging.group(1)).exists()
-    assert "$ sudo mv -f /tmp/.cloudsim-upload-" in log.text("sim")
+    assert "$ sudo chown root:root /tmp/.cloudsim-upload-" in log.text("sim")
     assert not apply(executor, machine, operation, sudo=True).changed
 
 
