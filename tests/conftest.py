@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import contextvars
 import itertools
+import re
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -79,7 +81,9 @@ class IsolatedClient(FlaskClient):
         return contextvars.Context().run(super().open, *args, **kwargs)
 
 
-def _app(config: Config) -> Iterator[Flask]:
+@contextmanager
+def running_app(config: Config) -> Iterator[Flask]:
+    """Create the app and its tables, and drop them afterwards."""
     app = create_app(config)
     app.test_client_class = IsolatedClient
     with app.app_context():
@@ -93,7 +97,8 @@ def _app(config: Config) -> Iterator[Flask]:
 @pytest.fixture
 def app(make_config: Callable[..., Config]) -> Iterator[Flask]:
     """An app on a fresh SQLite database, inside its app context."""
-    yield from _app(make_config())
+    with running_app(make_config()) as app:
+        yield app
 
 
 @pytest.fixture(params=["sqlite", "postgres"])
@@ -105,7 +110,8 @@ def any_db_app(
     if request.param == "postgres":
         server: PostgresServer = request.getfixturevalue("postgres_server")
         url = server.create_database(f"cloudsim_{next(_names)}")
-    yield from _app(make_config(url))
+    with running_app(make_config(url)) as app:
+        yield app
 
 
 @pytest.fixture
@@ -143,9 +149,17 @@ def client(app: Flask) -> FlaskClient:
     return app.test_client()
 
 
+def csrf_token(html: str) -> str:
+    """Return the CSRF token of the first form in a page ("" when the app has CSRF off)."""
+    match = re.search(r'name="csrf_token" type="hidden" value="([^"]+)"', html)
+    return match.group(1) if match else ""
+
+
 def log_in(client: FlaskClient, user: User) -> None:
-    """Log a test client in through the real login form (CSRF disabled by the caller)."""
-    response = client.post("/login", data={"email": user.email, "password": PASSWORD})
+    """Log a test client in through the real login form, CSRF token included."""
+    token = csrf_token(client.get("/login").get_data(as_text=True))
+    data = {"email": user.email, "password": PASSWORD, "csrf_token": token}
+    response = client.post("/login", data=data)
     assert response.status_code == 302, response.get_data(as_text=True)
 
 

@@ -10,13 +10,7 @@ from sqlalchemy import select
 from cloudsim.extensions import db
 from cloudsim.models import ApiToken, AuditEvent, User
 from cloudsim.people.service import update_user
-from tests.conftest import PASSWORD, log_in
-
-
-def _csrf(html: str) -> str:
-    match = re.search(r'name="csrf_token" type="hidden" value="([^"]+)"', html)
-    assert match, "no CSRF token in the page"
-    return match.group(1)
+from tests.conftest import PASSWORD, csrf_token, log_in
 
 
 def test_login_needs_csrf_and_the_right_password(
@@ -29,12 +23,12 @@ def test_login_needs_csrf_and_the_right_password(
     assert no_token.status_code == 400
     wrong = client.post(
         "/login",
-        data={"email": user.email, "password": "nope-nope-nope", "csrf_token": _csrf(page)},
+        data={"email": user.email, "password": "nope-nope-nope", "csrf_token": csrf_token(page)},
     )
     assert wrong.status_code == 401 and "Wrong e-mail or password" in wrong.get_data(as_text=True)
     ok = client.post(
         "/login",
-        data={"email": user.email.upper(), "password": PASSWORD, "csrf_token": _csrf(page)},
+        data={"email": user.email.upper(), "password": PASSWORD, "csrf_token": csrf_token(page)},
     )
     assert ok.status_code == 302
     cookie = next(c for c in client._cookies.values() if c.key == "session")

@@ -1,0 +1,223 @@
+"""Jobs run on a real Celery worker against a real Redis, and survive what workers suffer."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from datetime import timedelta
+from pathlib import Path
+
+import pytest
+from celery.contrib.testing.worker import start_worker
+from flask import Flask
+
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.jobs.service import enqueue, lost_jobs, send, sweep_jobs
+from cloudsim.models import Job, JobState, User, utcnow
+from tests.conftest import log_in, running_app
+from tests.support import job_kinds
+from tests.support.servers import wait_for
+
+PROJECT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def markers(tmp_path: Path) -> Path:
+    """A folder where test.slow jobs leave one file per attempt."""
+    path = tmp_path / "markers"
+    path.mkdir()
+    return path
+
+
+@pytest.fixture
+def worker(app: Flask) -> Iterator[None]:
+    with start_worker(
+        app.extensions["celery"],
+        pool="solo",
+        perform_ping_check=False,
+        loglevel="WARNING",
+        shutdown_timeout=10,
+    ):
+        yield
+
+
+def finished(job_id: str, timeout: float = 30) -> Job:
+    """Wait for a job to reach a final state and return its row, freshly read."""
+
+    def final() -> Job | None:
+        db.session.expire_all()
+        job = db.session.get(Job, job_id)
+        return job if job is not None and job.state.final else None
+
+    return wait_for(final, timeout, f"job {job_id} to finish")  # type: ignore[return-value]
+
+
+def test_diagnostics_job_runs_on_the_worker(app: Flask, worker: None) -> None:
+    job = finished(enqueue("diagnostics", None).id)
+    assert job.state == JobState.SUCCEEDED, job.error
+    assert job.progress == 100 and job.attempts == 1
+    for line in ("== database", "job queue reachable", "encryption keys usable", "GiB free"):
+        assert line in job.log
+    assert job.started_at is not None and job.finished_at >= job.started_at
+
+
+def test_failed_job_records_the_reason_with_secrets_masked(app: Flask, worker: None) -> None:
+    job = finished(enqueue("test.fail", None).id)
+    assert job.state == JobState.FAILED
+    assert job.error == "cloud refused key ***"
+    assert job.stage == "talking to the cloud" and job.progress == 40
+    assert "Traceback" in job.log and job_kinds.SECRET not in job.log + job.error
+
+
+def test_a_second_delivery_of_a_finished_job_does_nothing(app: Flask, worker: None) -> None:
+    job = finished(enqueue("diagnostics", None).id)
+    log_before = job.log
+    send(job)
+    send(job)
+    sentinel = finished(enqueue("diagnostics", None).id)  # the solo worker runs in order
+    assert sentinel.state == JobState.SUCCEEDED
+    db.session.expire_all()
+    again = db.session.get(Job, job.id)
+    assert again.attempts == 1 and again.log == log_before
+
+
+def test_a_job_whose_worker_vanished_is_resumed_by_the_sweeper(
+    app: Flask, worker: None, markers: Path
+) -> None:
+    job = Job(
+        id="11111111-2222-3333-4444-555555555555",
+        kind="test.slow",
+        state=JobState.RUNNING,
+        attempts=1,
+        heartbeat_at=utcnow() - timedelta(minutes=5),
+        params={"marker_dir": str(markers), "steps": 2, "seconds": 0.05},
+    )
+    db.session.add(job)
+    db.session.commit()
+    assert [j.id for j in lost_jobs()] == [job.id]
+    assert sweep_jobs() == 1
+    resumed = finished(job.id)
+    assert resumed.state == JobState.SUCCEEDED and resumed.attempts == 2
+    assert "resuming after an interrupted attempt (attempt 2)" in resumed.log
+
+
+def test_a_live_job_is_not_taken_over(app: Flask, worker: None, markers: Path) -> None:
+    job = Job(
+        id="99999999-2222-3333-4444-555555555555",
+        kind="test.slow",
+        state=JobState.RUNNING,
+        attempts=1,
+        heartbeat_at=utcnow(),
+        params={"marker_dir": str(markers)},
+    )
+    db.session.add(job)
+    db.session.commit()
+    assert lost_jobs() == []
+    send(job)
+    finished(enqueue("diagnostics", None).id)
+    db.session.expire_all()
+    assert db.session.get(Job, job.id).attempts == 1 and not list(markers.iterdir())
+
+
+def test_a_job_saved_while_the_queue_is_down_is_sent_later(
+    make_config: Callable[..., Config],
+) -> None:
+    dead = make_config(redis_url="redis://127.0.0.1:1/0", stale_job_seconds=0)
+    with running_app(dead):
+        job = enqueue("diagnostics", None)
+        assert job.state == JobState.QUEUED
+        assert [j.id for j in lost_jobs()] == [job.id]
+        assert sweep_jobs() == 0  # still down: nothing sent, nothing lost
+
+
+def test_job_page_follows_progress_and_log(
+    app: Flask, worker: None, people: dict[str, User | None]
+) -> None:
+    job = finished(enqueue("diagnostics", None).id)
+    client = app.test_client()
+    log_in(client, people["officer"])  # type: ignore[arg-type]
+    page = client.get(f"/jobs/{job.id}").get_data(as_text=True)
+    assert "succeeded" in page and "encryption keys usable" in page
+    full = client.get(f"/jobs/{job.id}/progress").json
+    assert full["state"] == "succeeded" and full["progress"] == 100
+    tail = client.get(f"/jobs/{job.id}/progress?since={full['log_length'] - 5}").json
+    assert tail["log"] == full["log"][-5:]
+
+
+def _worker_process(config: Config) -> subprocess.Popen[bytes]:
+    env = dict(
+        os.environ,
+        CLOUDSIM_INSTANCE_DIR=str(config.instance_dir),
+        CLOUDSIM_DATABASE_URL=config.database_url,
+        CLOUDSIM_REDIS_URL=config.effective_redis_url,
+        CLOUDSIM_ENCRYPTION_KEYS=",".join(config.encryption_keys),
+        CLOUDSIM_SECRET_KEY=config.secret_key,
+        CLOUDSIM_JOB_LEASE_SECONDS="2",
+        PYTHONPATH=str(PROJECT),
+    )
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "celery",
+            "-A",
+            "tests.support.worker_app",
+            "worker",
+            "--pool",
+            "prefork",
+            "--concurrency",
+            "1",
+            "--loglevel",
+            "WARNING",
+            "--queues",
+            "cloudsim",
+            "--without-mingle",
+            "--without-gossip",
+        ],
+        env=env,
+        cwd=PROJECT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+
+
+def _process_tree(pid: int) -> list[int]:
+    children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+    return [pid] + [p for c in children for p in _process_tree(int(c))]
+
+
+def test_killing_the_worker_mid_job_loses_nothing(
+    make_config: Callable[..., Config], markers: Path
+) -> None:
+    config = make_config(job_lease_seconds=2)
+    with running_app(config) as app:
+        process = _worker_process(config)
+        try:
+            job = enqueue(
+                "test.slow", None, params={"marker_dir": str(markers), "steps": 6, "seconds": 0.4}
+            )
+            wait_for(lambda: (markers / "attempt-1").exists(), 60, "the first attempt")
+            for pid in _process_tree(process.pid):
+                os.kill(pid, signal.SIGKILL)
+        finally:
+            process.kill()
+            process.wait()
+        db.session.expire_all()
+        assert db.session.get(Job, job.id).state == JobState.RUNNING
+        wait_for(lambda: lost_jobs(), 10, "the dead worker's lease to expire")
+        with start_worker(
+            app.extensions["celery"],
+            pool="solo",
+            perform_ping_check=False,
+            loglevel="WARNING",
+            shutdown_timeout=10,
+        ):
+            sweep_jobs()
+            done = finished(job.id)
+        assert done.state == JobState.SUCCEEDED and done.attempts == 2
+        assert (markers / "attempt-2").read_text() == str(os.getpid())
+        assert "resuming after an interrupted attempt" in done.log
