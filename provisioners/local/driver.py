@@ -3,9 +3,6 @@
 import datetime
 import functools
 import os
-import secrets
-import time
-import uuid
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Concatenate, ParamSpec, TypeVar
@@ -19,33 +16,18 @@ from libcloud.compute.base import (
     NodeLocation,
     NodeSize,
 )
-from libcloud.compute.types import NodeState
 
-from provisioners.local import host, netns, processes
-from provisioners.local.addresses import (
-    allocate_address,
-    check_address_free,
-    check_name,
-    check_prefix,
-    parse_address,
-    parse_subnet,
-)
-from provisioners.local.errors import (
-    HostBootError,
-    InvalidRequestError,
-    LocalProviderError,
-    NameInUseError,
-    NotRootError,
-)
+from provisioners.local import host, netns
+from provisioners.local.addresses import check_name, check_prefix, parse_address, parse_subnet
+from provisioners.local.errors import InvalidRequestError, LocalProviderError, NotRootError
 from provisioners.local.network import LocalNetwork, NetworkManager
-from provisioners.local.state import STATUS_CREATING, STATUS_RUNNING, NodeRecord, StateStore
+from provisioners.local.nodes import NodeManager, NodeRequest, node_state
+from provisioners.local.state import NetworkRecord, NodeRecord, StateStore
 
 SIZE_ID = "host"
 IMAGE_ID = "debian-12"
 IMAGE_NAME = "debian-12 (this machine's root)"
 LOCATION_ID = "localhost"
-LAN_INTERFACE = "eth0"
-PUBLIC_INTERFACE = "eth1"
 DEFAULT_BOOT_TIMEOUT_SECONDS = 60.0
 
 _Driver = TypeVar("_Driver", bound="LocalNodeDriver")
@@ -107,6 +89,7 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
             subnet_pool=parse_subnet(subnet_pool, max_prefixlen=24),
             public_subnet=parse_subnet(public_cidr),
         )
+        self._nodes = NodeManager(self._store, self._networks, boot_timeout)
 
     # -- networks ------------------------------------------------------------------------------
 
@@ -168,48 +151,35 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
         tags = _check_tags(ex_tags)
         if ex_network is None:
             raise InvalidRequestError("create_node needs ex_network (from ex_create_network)")
-        record = self._reserve_node(name, init, tags, ex_network.name, ex_private_ip, ex_public)
-        record.size = size.id if size is not None else SIZE_ID
-        record.image = image.id if image is not None else IMAGE_ID
-        spec = self._host_spec(record)
-        try:
-            spec.authorized_keys.write_text(public_key + "\n")
-            self._plug_node(record)
-            self._boot(record, spec)
-        except BaseException as error:
-            log_tail = host.boot_log_tail(spec)
-            try:
-                self._teardown_node(record)
-            except LocalProviderError as cleanup_error:
-                error.add_note(f"cleaning up node {name} failed too: {cleanup_error}")
-            if isinstance(error, LocalProviderError):
-                raise HostBootError(
-                    f"creating node {name} failed: {error}\n"
-                    f"--- boot log of {name} (last lines) ---\n{log_tail}"
-                ) from error
-            raise
+        request = NodeRequest(
+            name=name,
+            network=ex_network.name,
+            init=init,
+            public_key=public_key,
+            private_ip=ex_private_ip,
+            public=ex_public,
+            tags=tags,
+            size=size.id if size is not None else SIZE_ID,
+            image=image.id if image is not None else IMAGE_ID,
+        )
+        record = self._nodes.create(request)
         return self._to_node(record)
 
     @requires_root
     def destroy_node(self, node: Node) -> bool:
         """Remove every namespace, mount, process and file of the node; True if already gone."""
-        record = self._find_record(node)
+        record = self._nodes.find(node.name, node.id)
         if record is not None:
-            self._teardown_node(record)
+            self._nodes.destroy(record)
         return True
 
     @requires_root
     def reboot_node(self, node: Node) -> bool:
         """Restart the host's init, keeping its filesystem, host keys and addresses."""
-        record = self._find_record(node)
+        record = self._nodes.find(node.name, node.id)
         if record is None:
             raise LocalProviderError(f"no node {node.name!r} under prefix {self.prefix!r}")
-        host.stop_host(record.launcher, record.init_process)
-        record.launcher = record.init_process = None
-        record.status = STATUS_CREATING
-        spec = self._host_spec(record)
-        spec.launcher_pidfile.unlink(missing_ok=True)
-        self._boot(record, spec)
+        self._nodes.reboot(record)
         return True
 
     @requires_root
@@ -242,124 +212,7 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
             extra={"cpus": os.cpu_count()},
         )
 
-    def _reserve_node(
-        self,
-        name: str,
-        init: str,
-        tags: dict[str, str],
-        network_name: str,
-        private_ip: str | None,
-        public: bool,
-    ) -> NodeRecord:
-        """Allocate addresses and persist a "creating" record, all under the state lock."""
-        with self._store.lock():
-            if self._store.find_node(name) is not None:
-                raise NameInUseError(f"a node named {name!r} already exists")
-            network = self._networks.get(network_name)
-            nodes = self._store.read_nodes()
-            subnet = parse_subnet(network.cidr)
-            lan_taken = [parse_address(n.private_ip) for n in nodes if n.network == network.name]
-            if private_ip is None:
-                lan_address = allocate_address(subnet, lan_taken)
-            else:
-                lan_address = parse_address(private_ip)
-                check_address_free(subnet, lan_address, lan_taken)
-            public_address = None
-            if public:
-                public_taken = [parse_address(n.public_ip) for n in nodes if n.public_ip]
-                public_address = allocate_address(self._networks.public_subnet, public_taken)
-                self._networks.ensure_public()
-            host.mount_hosts_tmpfs(self._store.hosts_dir, f"{self.prefix}-hosts")
-            record = NodeRecord(
-                id=secrets.token_hex(6),
-                name=name,
-                network=network.name,
-                netns=f"{self.prefix}-h-{name}",
-                machine=f"{self.prefix}-{name}",
-                init=init,
-                private_ip=str(lan_address),
-                public_ip=None if public_address is None else str(public_address),
-                machine_id=uuid.uuid4().hex,
-                tags=tags,
-                created_at=time.time(),
-                creator=processes.identify(os.getpid()),
-            )
-            self._store.write_node(record)
-        return record
-
-    def _plug_node(self, record: NodeRecord) -> None:
-        """Create the node's network namespace and wire it to its switches."""
-        network = self._networks.get(record.network)
-        port = f"p{record.id}"
-        netns.create_namespace(record.netns)
-        netns.plug_into_switch(
-            record.netns, LAN_INTERFACE, network.switch_netns, port,
-            f"{record.private_ip}/{parse_subnet(network.cidr).prefixlen}",
-        )  # fmt: skip
-        if record.public_ip is not None:
-            public = self._networks.public_record()
-            netns.plug_into_switch(
-                record.netns, PUBLIC_INTERFACE, public.switch_netns, port,
-                f"{record.public_ip}/{self._networks.public_subnet.prefixlen}",
-            )  # fmt: skip
-            if public.gateway is not None:
-                netns.add_default_route(record.netns, public.gateway)
-        elif network.gateway is not None:
-            netns.add_default_route(record.netns, network.gateway)
-
-    def _boot(self, record: NodeRecord, spec: host.HostSpec) -> None:
-        """Start the host, record its processes, wait for sshd, mark it running."""
-        started = host.start_host(spec, self.boot_timeout)
-        record.launcher, record.init_process = started.launcher, started.init
-        self._store.write_node(record)
-        host.wait_for_sshd(spec, started, self.boot_timeout)
-        record.status = STATUS_RUNNING
-        self._store.write_node(record)
-
-    def _teardown_node(self, record: NodeRecord) -> None:
-        """Stop the host's processes, delete its namespace and files, forget it."""
-        spec = self._host_spec(record)
-        launcher = record.launcher or _launcher_from_pidfile(spec)
-        host.stop_host(launcher, record.init_process)
-        for pid in netns.namespace_pids(record.netns):
-            # Stragglers joined the namespace from outside (nsenter); the namespace is ours.
-            leftover = processes.identify(pid)
-            if leftover is not None:
-                processes.kill(leftover, host.KILL_WAIT_SECONDS)
-        netns.delete_namespace(record.netns)
-        host.remove_host_files(spec)
-        with self._store.lock():
-            current = self._store.find_node(record.name)
-            if current is not None and current.id == record.id:
-                self._store.delete_node(record.name)
-            remaining = self._store.read_nodes()
-            if not any(node.public_ip for node in remaining):
-                self._networks.destroy_public()
-            if not remaining:
-                host.unmount_hosts_tmpfs(self._store.hosts_dir)
-            self._store.remove_empty_dirs()
-
-    def _find_record(self, node: Node) -> NodeRecord | None:
-        """Return the record behind a Node (by name, and same id), None when it is gone."""
-        record = self._store.find_node(node.name) if node.name else None
-        if record is None:
-            record = next((r for r in self._store.read_nodes() if r.id == node.id), None)
-        if record is None or (node.id and record.id != node.id):
-            return None
-        return record
-
-    def _host_spec(self, record: NodeRecord) -> host.HostSpec:
-        return host.HostSpec(
-            hostname=record.name,
-            machine=record.machine,
-            netns=record.netns,
-            init=record.init,
-            host_dir=self._store.host_dir(record.name),
-            node_dir=self._store.node_dir(record.name),
-            machine_id=record.machine_id,
-        )
-
-    def _to_network(self, record: Any) -> LocalNetwork:
+    def _to_network(self, record: NetworkRecord) -> LocalNetwork:
         return LocalNetwork(
             id=record.name,
             name=record.name,
@@ -374,7 +227,7 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
         return Node(
             id=record.id,
             name=record.name,
-            state=_node_state(record),
+            state=node_state(record),
             public_ips=[record.public_ip] if record.public_ip else [],
             private_ips=[record.private_ip],
             driver=self,
@@ -394,31 +247,6 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
                 ),
             },
         )
-
-
-def _node_state(record: NodeRecord) -> NodeState:
-    """Map a record and the liveness of its processes to libcloud's NodeState."""
-    if record.init_process is not None and processes.is_alive(record.init_process):
-        return NodeState.RUNNING if record.status == STATUS_RUNNING else NodeState.PENDING
-    if record.status == STATUS_CREATING:
-        creator_alive = record.creator is not None and processes.is_alive(record.creator)
-        return NodeState.PENDING if creator_alive else NodeState.ERROR
-    return NodeState.STOPPED
-
-
-def _launcher_from_pidfile(spec: host.HostSpec) -> processes.ProcessId | None:
-    """Return the launcher a crashed create_node started but did not record, if still ours."""
-    if not spec.launcher_pidfile.exists():
-        return None
-    text = spec.launcher_pidfile.read_text().strip()
-    if not text.isdigit():
-        return None
-    candidate = processes.identify(int(text))
-    if candidate is None:
-        return None
-    # A recycled PID would not carry this host's directory on its command line.
-    command_line = Path(f"/proc/{candidate.pid}/cmdline").read_bytes()
-    return candidate if str(spec.host_dir).encode() in command_line else None
 
 
 def _public_key(auth: Any) -> str:

@@ -73,6 +73,8 @@ class HostShell:
     def run(self, command: str, timeout: float = 30.0) -> tuple[int, str, str]:
         """Run a shell command on the host; return (exit status, stdout, stderr)."""
         _stdin, stdout, stderr = self.client.exec_command(command, timeout=timeout)
+        if not stdout.channel.status_event.wait(timeout):
+            raise TimeoutError(f"{command!r} did not finish in {timeout} s")
         status = stdout.channel.recv_exit_status()
         return status, stdout.read().decode(), stderr.read().decode()
 

@@ -111,7 +111,7 @@ def test_systemd_host_boots_with_ssh_and_base_image_services_masked(
     for unit in ("postgresql.service", "redis-server.service"):
         status, out, _ = router.run(f"systemctl is-enabled {unit}")
         assert out.strip() == "masked", f"{unit}: {out} (exit {status})"
-    state = router.run("systemctl is-system-running --wait")[1].strip()
+    state = router.run("systemctl is-system-running --wait", timeout=60)[1].strip()
     assert state in ("running", "degraded")
 
 

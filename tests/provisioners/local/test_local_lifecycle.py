@@ -1,0 +1,244 @@
+"""Destroy leaves nothing behind, failures clean up, networks stay apart, reboot keeps state."""
+
+import subprocess
+import sys
+import threading
+from collections.abc import Callable
+from ipaddress import ip_network
+from pathlib import Path
+from typing import Any
+
+import pytest
+from libcloud.compute.base import Node
+from libcloud.compute.providers import get_driver
+from libcloud.compute.types import NodeState
+from local_support import HostShell, SshKey, mounts_under, needs_root
+
+from provisioners.local import processes, register
+from provisioners.local.driver import LocalNodeDriver
+from provisioners.local.errors import (
+    AddressError,
+    HostBootError,
+    InvalidRequestError,
+    NameInUseError,
+    NetworkInUseError,
+    NetworkNotFoundError,
+)
+from provisioners.local.netns import list_namespaces
+from provisioners.local.network import LocalNetwork
+
+pytestmark = [pytest.mark.hosts, needs_root]
+
+Shells = Callable[[Node, SshKey], HostShell]
+
+
+def _create(
+    driver: LocalNodeDriver, name: str, network: LocalNetwork, key: SshKey, **options: Any
+) -> Node:
+    return driver.create_node(name, None, None, auth=key.auth, ex_network=network, **options)
+
+
+def _recorded_processes(node: Node) -> list[processes.ProcessId]:
+    """Return the node's init and launcher as recorded, identified by start time."""
+    found = [processes.identify(node.extra["pid"]), processes.identify(node.extra["launcher_pid"])]
+    assert all(process is not None for process in found)
+    return [process for process in found if process is not None]
+
+
+def _assert_nothing_left(
+    node: Node, state_dir: Path, prefix: str, pids: list[processes.ProcessId]
+) -> None:
+    assert node.extra["netns"] not in list_namespaces(f"{prefix}-")
+    assert not any(process.pid and processes.is_alive(process) for process in pids)
+    mounts = Path("/proc/mounts").read_text()
+    assert node.extra["machine"] not in mounts
+    assert not Path(f"/run/systemd/nspawn/propagate/{node.extra['machine']}").exists()
+    assert not (state_dir / prefix / "nodes" / node.name).exists()
+    assert not (state_dir / prefix / "hosts" / node.name).exists()
+
+
+def test_destroy_removes_every_namespace_mount_process_and_file(
+    driver: LocalNodeDriver, ssh_key: SshKey, state_dir: Path, host_prefix: str
+) -> None:
+    network = driver.ex_create_network("gone")
+    nodes = [
+        _create(driver, "gone-boot", network, ssh_key, ex_public=True, ex_init="systemd"),
+        _create(driver, "gone-tini", network, ssh_key, ex_init="minimal"),
+    ]
+    recorded = {node.name: _recorded_processes(node) for node in nodes}
+    with pytest.raises(NetworkInUseError, match="gone-boot, gone-tini"):
+        driver.ex_destroy_network(network)
+
+    for node in nodes:
+        assert driver.destroy_node(node) is True
+        _assert_nothing_left(node, state_dir, host_prefix, recorded[node.name])
+        assert driver.destroy_node(node) is True
+    assert driver.list_nodes() == []
+    assert f"{host_prefix}-s-public" not in list_namespaces(f"{host_prefix}-")
+    assert mounts_under(state_dir) == []
+
+    assert driver.ex_destroy_network(network) is True
+    assert driver.ex_destroy_network(network) is True
+    assert list_namespaces(f"{host_prefix}-") == []
+    assert [path.name for path in state_dir.iterdir()] == [".lock"]
+
+
+def test_failed_boot_raises_with_the_boot_log_and_cleans_up(
+    make_driver: Callable[[], LocalNodeDriver], ssh_key: SshKey, state_dir: Path, host_prefix: str
+) -> None:
+    impatient = LocalNodeDriver(state_dir=str(state_dir), prefix=host_prefix, boot_timeout=0.01)
+    network = impatient.ex_create_network("doomed")
+    try:
+        with pytest.raises(HostBootError) as raised:
+            _create(impatient, "doomed", network, ssh_key, ex_init="minimal")
+        assert "creating node doomed failed" in str(raised.value)
+        assert "--- boot log of doomed" in str(raised.value)
+        assert make_driver().list_nodes() == []
+        assert f"{host_prefix}-h-doomed" not in list_namespaces(f"{host_prefix}-")
+        assert not (state_dir / host_prefix / "nodes" / "doomed").exists()
+        assert mounts_under(state_dir) == []
+    finally:
+        impatient.ex_destroy_network(network)
+
+
+def test_bad_requests_are_refused_before_anything_is_made(
+    driver: LocalNodeDriver, ssh_key: SshKey, host_prefix: str
+) -> None:
+    network = driver.ex_create_network("strict", cidr="10.212.9.0/24")
+    try:
+        with pytest.raises(AddressError, match="not a host address"):
+            _create(driver, "stray", network, ssh_key, ex_private_ip="10.9.9.9")
+        with pytest.raises(InvalidRequestError, match="NodeAuthSSHKey"):
+            driver.create_node("nokey", None, None, ex_network=network)
+        with pytest.raises(InvalidRequestError, match="ex_init"):
+            _create(driver, "badinit", network, ssh_key, ex_init="upstart")
+        with pytest.raises(AddressError, match="overlaps"):
+            driver.ex_create_network("clash", cidr="10.212.9.128/25")
+        with pytest.raises(NameInUseError):
+            driver.ex_create_network("strict")
+        with pytest.raises(InvalidRequestError, match="reserved"):
+            driver.ex_create_network("public")
+        assert driver.list_nodes() == []
+        assert [n.name for n in driver.ex_list_networks()] == ["strict"]
+    finally:
+        driver.ex_destroy_network(network)
+    with pytest.raises(NetworkNotFoundError):
+        driver.ex_get_network("strict")
+    assert list_namespaces(f"{host_prefix}-") == []
+
+
+def test_networks_created_at_once_by_two_drivers_get_distinct_subnets(
+    make_driver: Callable[[], LocalNodeDriver],
+) -> None:
+    drivers = [make_driver(), make_driver()]
+    created: dict[str, str] = {}
+
+    def create(index: int) -> None:
+        network = drivers[index % 2].ex_create_network(f"par{index}")
+        created[network.name] = network.cidr
+
+    threads = [threading.Thread(target=create, args=(index,)) for index in range(6)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    try:
+        subnets = [ip_network(cidr) for cidr in created.values()]
+        assert len(subnets) == 6
+        assert not any(a.overlaps(b) for i, a in enumerate(subnets) for b in subnets[i + 1 :])
+        assert {n.name: n.cidr for n in make_driver().ex_list_networks()} == created
+    finally:
+        for network in make_driver().ex_list_networks():
+            drivers[0].ex_destroy_network(network)
+
+
+def test_two_networks_cannot_reach_each_other(
+    driver: LocalNodeDriver, ssh_key: SshKey, shells: Shells
+) -> None:
+    blue, red = driver.ex_create_network("blue"), driver.ex_create_network("red")
+    nodes: list[Node] = []
+    try:
+        for network in (blue, red):
+            nodes.append(
+                _create(driver, f"{network.name}-sim", network, ssh_key, ex_init="minimal")
+            )
+        assert not ip_network(blue.cidr).overlaps(ip_network(red.cidr))
+        blue_sim, red_sim = (shells(node, ssh_key) for node in nodes)
+        # Even when told that red's subnet is on its own wire, blue finds nobody there.
+        blue_sim.check(f"ip route add {red.cidr} dev eth0")
+        assert blue_sim.run(f"ping -c 1 -W 1 {nodes[1].private_ips[0]}")[0] != 0
+        red_sim.check(f"ip route add {blue.cidr} dev eth0")
+        assert red_sim.run(f"ping -c 1 -W 1 {nodes[0].private_ips[0]}")[0] != 0
+        # Each one does reach its own switch's broadcast domain: itself.
+        blue_sim.check(f"ping -c 1 -W 1 {nodes[0].private_ips[0]}")
+    finally:
+        for node in nodes:
+            driver.destroy_node(node)
+        for network in (blue, red):
+            driver.ex_destroy_network(network)
+
+
+def test_reboot_keeps_files_host_key_and_addresses(
+    driver: LocalNodeDriver, ssh_key: SshKey, shells: Shells
+) -> None:
+    network = driver.ex_create_network("again")
+    tenth = ip_network(network.cidr)[9].compressed
+    node = _create(driver, "again", network, ssh_key, ex_private_ip=tenth, ex_init="minimal")
+    try:
+        assert node.private_ips == [tenth]
+        with pytest.raises(NameInUseError):
+            _create(driver, "again", network, ssh_key)
+        first_init = processes.identify(node.extra["pid"])
+        assert first_init is not None
+        before = shells(node, ssh_key)
+        before.check("echo kept > /root/kept.txt")
+        before.close()
+        assert driver.reboot_node(node) is True
+        rebooted = next(n for n in driver.list_nodes() if n.name == "again")
+        assert rebooted.state == NodeState.RUNNING
+        assert rebooted.extra["pid"] != node.extra["pid"]
+        assert not processes.is_alive(first_init)
+        after = shells(rebooted, ssh_key)
+        assert after.check("cat /root/kept.txt").strip() == "kept"
+        assert after.host_key.asbytes() == before.host_key.asbytes()
+    finally:
+        driver.destroy_node(node)
+        driver.ex_destroy_network(network)
+
+
+def test_catalogue_has_one_size_image_and_location(driver: LocalNodeDriver) -> None:
+    assert [size.id for size in driver.list_sizes()] == ["host"]
+    assert [image.name for image in driver.list_images()] == ["debian-12 (this machine's root)"]
+    assert [location.id for location in driver.list_locations()] == ["localhost"]
+
+
+def test_register_makes_the_driver_available_by_name() -> None:
+    register()
+    register()
+    assert get_driver("local") is LocalNodeDriver
+
+
+def test_a_non_root_caller_is_told_that_root_is_needed(tmp_path: Path) -> None:
+    script = (
+        "from provisioners.local.driver import LocalNodeDriver\n"
+        f"LocalNodeDriver(state_dir={str(tmp_path)!r}).list_nodes()\n"
+    )
+    result = subprocess.run(
+        [
+            "setpriv",
+            "--reuid=65534",
+            "--regid=65534",
+            "--clear-groups",
+            sys.executable,
+            "-B",
+            "-c",
+            script,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert result.returncode != 0
+    assert "NotRootError: the local provider needs root (running as uid 65534)" in result.stderr
+    assert list(tmp_path.iterdir()) == []
