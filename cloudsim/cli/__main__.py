@@ -1,0 +1,5 @@
+"""Run the CLI as `python -m cloudsim.cli`."""
+
+from cloudsim.cli import main
+
+main()

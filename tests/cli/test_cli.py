@@ -1,0 +1,109 @@
+"""The `cloudsim` command: help, migrations, teams and users, JSON output, one-line errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner, Result
+
+from cloudsim.cli import main
+from tests.support.servers import RedisServer
+
+
+@pytest.fixture
+def run(tmp_path: Path, redis_server: RedisServer, encryption_key: str) -> Callable[..., Result]:
+    env = {
+        "CLOUDSIM_INSTANCE_DIR": str(tmp_path / "instance"),
+        "CLOUDSIM_REDIS_URL": redis_server.url(0),
+        "CLOUDSIM_ENCRYPTION_KEYS": encryption_key,
+        "CLOUDSIM_ARGON2_TIME_COST": "1",
+        "CLOUDSIM_ARGON2_MEMORY_KIB": "1024",
+    }
+
+    def invoke(*args: str, stdin: str | None = None) -> Result:
+        return CliRunner().invoke(main, list(args), env=env, input=stdin)
+
+    assert invoke("db", "upgrade").exit_code == 0
+    return invoke
+
+
+def test_help_lists_the_commands() -> None:
+    out = subprocess.run(
+        [str(Path(".venv/bin/cloudsim").resolve()), "--help"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    for command in ("up", "db", "team", "user"):
+        assert f"  {command} " in out
+
+
+def test_db_current_and_downgrade(run: Callable[..., Result]) -> None:
+    assert run("db", "current").output.strip() == "0001"
+    assert "base" in run("db", "downgrade", "base").output
+    assert "empty database" in run("db", "current").output
+
+
+def test_teams_and_users_with_json_output(run: Callable[..., Result]) -> None:
+    team = json.loads(run("team", "create", "Team Seven", "--json").output)
+    assert team["name"] == "Team Seven" and team["id"] >= 1
+    created = run("user", "create", "--email", "Pat@Example.org", "--team", "Team Seven", "--json")
+    assert created.exit_code == 0, created.output
+    user = json.loads(created.output)
+    assert user["email"] == "pat@example.org" and user["team"] == "Team Seven"
+    assert len(user["password"]) >= 16  # generated and shown this once
+    officer = run(
+        "user",
+        "create",
+        "--email",
+        "o@example.org",
+        "--role",
+        "officer",
+        "--password-stdin",
+        "--json",
+        stdin="a long enough password\n",
+    )
+    assert "password" not in json.loads(officer.output)
+    listing = json.loads(run("user", "list", "--json").output)
+    assert [u["email"] for u in listing] == ["o@example.org", "pat@example.org"]
+    assert "Team Seven\t1 members" in run("team", "list").output
+
+
+@pytest.mark.parametrize(
+    ("args", "code", "message"),
+    [
+        (("team", "create", "   "), 1, "Error: team name must not be empty"),
+        (
+            ("user", "create", "--email", "x@example.org", "--team", "Nope"),
+            1,
+            "Error: no team named 'Nope'",
+        ),
+        (
+            ("user", "create", "--email", "not-an-email", "--role", "admin"),
+            1,
+            "Error: invalid e-mail address",
+        ),
+        (("user", "create", "--email", "x@example.org"), 1, "must belong to a team"),
+        (("user", "create", "--email", "x@example.org", "--role", "king"), 2, "Invalid value"),
+        (("team", "frobnicate"), 2, "No such command"),
+    ],
+)
+def test_bad_input_gives_one_line_and_nonzero_exit(
+    run: Callable[..., Result], args: tuple[str, ...], code: int, message: str
+) -> None:
+    result = run(*args)
+    assert result.exit_code == code
+    assert message in result.output
+    if code == 1:
+        assert len(result.output.strip().splitlines()) == 1
+    assert run("user", "list").output.strip() == "no users"
+
+
+def test_duplicate_team_is_refused(run: Callable[..., Result]) -> None:
+    run("team", "create", "Dup")
+    result = run("team", "create", "dup")
+    assert result.exit_code == 1 and "already exists" in result.output
