@@ -91,6 +91,11 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
         )
         self._nodes = NodeManager(self._store, self._networks, boot_timeout)
 
+    @property
+    def hosts_dir(self) -> Path:
+        """Return where the hosts' overlay upper dirs live (a tmpfs while any host exists)."""
+        return self._store.hosts_dir
+
     # -- networks ------------------------------------------------------------------------------
 
     @requires_root

@@ -4,6 +4,7 @@ import fcntl
 import json
 import os
 import shutil
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
@@ -98,21 +99,20 @@ class StateStore:
 
     def read_networks(self) -> list[NetworkRecord]:
         """Return this prefix's network records."""
-        return [NetworkRecord(**_read_json(path)) for path in _json_files(self.networks_dir)]
+        return _read_networks(_json_files(self.networks_dir))
 
     def read_all_prefixes_networks(self) -> list[NetworkRecord]:
         """Return the network records of every prefix sharing state_dir."""
-        records: list[NetworkRecord] = []
-        if self.state_dir.is_dir():
-            for prefix_dir in sorted(self.state_dir.iterdir()):
-                for path in _json_files(prefix_dir / "networks"):
-                    records.append(NetworkRecord(**_read_json(path)))
-        return records
+        if not self.state_dir.is_dir():
+            return []
+        return _read_networks(
+            [path for d in sorted(self.state_dir.iterdir()) for path in _json_files(d / "networks")]
+        )
 
     def find_network(self, name: str) -> NetworkRecord | None:
         """Return the named network's record, None when absent."""
-        path = self.networks_dir / f"{name}.json"
-        return NetworkRecord(**_read_json(path)) if path.exists() else None
+        data = _read_json(self.networks_dir / f"{name}.json")
+        return None if data is None else NetworkRecord(**data)
 
     def write_network(self, record: NetworkRecord) -> None:
         """Persist a network record."""
@@ -126,15 +126,17 @@ class StateStore:
         """Return this prefix's node records."""
         if not self.nodes_dir.is_dir():
             return []
-        return [
-            NodeRecord.from_json(_read_json(path))
-            for path in sorted(self.nodes_dir.glob("*/record.json"))
-        ]
+        records = []
+        for path in sorted(self.nodes_dir.glob("*/record.json")):
+            data = _read_json(path)
+            if data is not None:
+                records.append(NodeRecord.from_json(data))
+        return records
 
     def find_node(self, name: str) -> NodeRecord | None:
         """Return the named node's record, None when absent."""
-        path = self.node_dir(name) / "record.json"
-        return NodeRecord.from_json(_read_json(path)) if path.exists() else None
+        data = _read_json(self.node_dir(name) / "record.json")
+        return None if data is None else NodeRecord.from_json(data)
 
     def write_node(self, record: NodeRecord) -> None:
         """Persist a node record, creating its directory."""
@@ -148,7 +150,8 @@ class StateStore:
     def remove_empty_dirs(self) -> None:
         """Remove this prefix's directories once they hold nothing."""
         for directory in (self.networks_dir, self.nodes_dir, self.hosts_dir, self.root):
-            if directory.is_dir() and not any(directory.iterdir()):
+            # The hosts dir stays while its tmpfs is mounted, empty or not.
+            if directory.is_dir() and not directory.is_mount() and not any(directory.iterdir()):
                 directory.rmdir()
 
 
@@ -156,9 +159,21 @@ def _json_files(directory: Path) -> list[Path]:
     return sorted(directory.glob("*.json")) if directory.is_dir() else []
 
 
-def _read_json(path: Path) -> dict[str, Any]:
+def _read_networks(paths: list[Path]) -> list[NetworkRecord]:
+    records = []
+    for path in paths:
+        data = _read_json(path)
+        if data is not None:
+            records.append(NetworkRecord(**data))
+    return records
+
+
+def _read_json(path: Path) -> dict[str, Any] | None:
+    """Return a record's data, None when it does not exist (or was just deleted)."""
     try:
         data = json.loads(path.read_text())
+    except FileNotFoundError:
+        return None
     except (OSError, ValueError) as error:
         raise LocalProviderError(f"cannot read state record {path}: {error}") from error
     if not isinstance(data, dict):
@@ -168,7 +183,8 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 def _write_json(path: Path, data: dict[str, Any]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_suffix(".tmp")
+    # One temporary file per writer: threads and processes may write the same record.
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
     temporary.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
     # Readers never see half a record: replace is atomic within one filesystem.
     os.replace(temporary, path)

@@ -130,6 +130,17 @@ def test_lan_hosts_reach_each_other(lan: Lan, ssh_key: SshKey, shells: Shells) -
     router.check(f"ping -c 1 -W 2 {lan.sim.private_ips[0]}")
 
 
+def test_public_host_routes_to_the_internet_and_lan_host_has_no_default_route(
+    lan: Lan, ssh_key: SshKey, shells: Shells
+) -> None:
+    router, sim = shells(lan.router, ssh_key), shells(lan.sim, ssh_key)
+    assert router.check("ip route show default").split()[:5] == [
+        "default", "via", "198.18.0.1", "dev", "eth1",
+    ]  # fmt: skip
+    router.check("ping -c 1 -W 2 198.18.0.1")
+    assert sim.check("ip route show default").strip() == ""
+
+
 def _banner_from_public_side(
     driver: LocalNodeDriver, ip: str
 ) -> subprocess.CompletedProcess[bytes]:

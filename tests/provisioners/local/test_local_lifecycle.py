@@ -181,8 +181,9 @@ def test_two_networks_cannot_reach_each_other(
 def test_reboot_keeps_files_host_key_and_addresses(
     driver: LocalNodeDriver, ssh_key: SshKey, shells: Shells
 ) -> None:
-    network = driver.ex_create_network("again")
-    tenth = ip_network(network.cidr)[9].compressed
+    network = driver.ex_create_network("again", cidr="10.212.10.0/24", ex_gateway="10.212.10.1")
+    assert network.gateway == "10.212.10.1"
+    tenth = "10.212.10.9"
     node = _create(driver, "again", network, ssh_key, ex_private_ip=tenth, ex_init="minimal")
     try:
         assert node.private_ips == [tenth]
@@ -192,6 +193,11 @@ def test_reboot_keeps_files_host_key_and_addresses(
         assert first_init is not None
         before = shells(node, ssh_key)
         before.check("echo kept > /root/kept.txt")
+        assert before.check("ip route show default").split()[:3] == [
+            "default",
+            "via",
+            "10.212.10.1",
+        ]
         before.close()
         assert driver.reboot_node(node) is True
         rebooted = next(n for n in driver.list_nodes() if n.name == "again")
@@ -204,6 +210,22 @@ def test_reboot_keeps_files_host_key_and_addresses(
     finally:
         driver.destroy_node(node)
         driver.ex_destroy_network(network)
+
+
+def test_a_host_whose_init_died_is_stopped_and_still_destroyed_cleanly(
+    driver: LocalNodeDriver, ssh_key: SshKey, state_dir: Path, host_prefix: str
+) -> None:
+    network = driver.ex_create_network("crash")
+    node = _create(driver, "crash", network, ssh_key, ex_init="systemd")
+    try:
+        recorded = _recorded_processes(node)
+        processes.kill(recorded[0], timeout=10)
+        assert processes.wait_until_gone(recorded[1], timeout=10)
+        assert [n.state for n in driver.list_nodes()] == [NodeState.STOPPED]
+    finally:
+        driver.destroy_node(node)
+        driver.ex_destroy_network(network)
+    _assert_nothing_left(node, state_dir, host_prefix, recorded)
 
 
 def test_catalogue_has_one_size_image_and_location(driver: LocalNodeDriver) -> None:
