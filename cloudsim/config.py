@@ -67,7 +67,7 @@ SETTINGS: dict[str, Setting] = {
         "5 per minute;30 per hour", "Failed logins allowed per address and account"
     ),
     "CLOUDSIM_JOB_VISIBILITY_TIMEOUT": Setting(
-        "3600", "Seconds before a job whose worker vanished is handed to another worker"
+        "3600", "Seconds before Redis re-delivers an unacknowledged job message"
     ),
     "CLOUDSIM_JOB_LEASE_SECONDS": Setting(
         "30", "A running job whose worker has not renewed its lease this long is resumed elsewhere"

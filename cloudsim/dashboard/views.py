@@ -6,6 +6,7 @@ from flask import Blueprint, render_template
 from flask.typing import ResponseReturnValue
 from flask_login import current_user, login_required
 from sqlalchemy import func, select
+from sqlalchemy.orm import selectinload
 
 from cloudsim.extensions import db
 from cloudsim.jobs.service import visible_jobs
@@ -23,7 +24,10 @@ def index() -> ResponseReturnValue:
         return render_template(
             "dashboard/admin.html",
             constellations=db.session.scalars(
-                select(Constellation).order_by(Constellation.created_at.desc()).limit(50)
+                select(Constellation)
+                .options(selectinload(Constellation.machines), selectinload(Constellation.team))
+                .order_by(Constellation.created_at.desc())
+                .limit(50)
             ).all(),
             jobs=db.session.scalars(visible_jobs(current_user).limit(RECENT)).all(),
             counts=_counts(),

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 from email_validator import EmailNotValidError, validate_email
 from sqlalchemy import func, select
+from sqlalchemy.orm import selectinload
 
 from cloudsim.audit.service import record
 from cloudsim.auth.passwords import generate_password, hash_password
@@ -58,7 +59,7 @@ def find_team(name_or_id: str) -> Team:
 
 def visible_teams(actor: User | None) -> list[Team]:
     """Return the teams the actor may see, by name."""
-    query = select(Team).order_by(Team.name)
+    query = select(Team).order_by(Team.name).options(selectinload(Team.members))
     if actor is not None and not actor.has_role(Role.OFFICER):
         query = query.where(Team.id == actor.team_id)
     return list(db.session.scalars(query))
@@ -151,7 +152,7 @@ def get_user(actor: User | None, user_id: int) -> User:
 
 def visible_users(actor: User | None, team_id: int | None = None) -> list[User]:
     """Return the users the actor may see: officers all, users their own team's."""
-    query = select(User).order_by(User.email)
+    query = select(User).order_by(User.email).options(selectinload(User.team))
     if actor is not None and not actor.has_role(Role.OFFICER):
         query = query.where(User.team_id == actor.team_id)
     if team_id is not None:
