@@ -35,7 +35,7 @@ def record(
     return event
 
 
-def visible_events(viewer: User, *, action: str | None = None) -> Select[tuple[AuditEvent]]:
+def visible_events(viewer: User, *, action: str | None = None) -> Select[AuditEvent]:
     """Return a query for the events `viewer` may see, newest first."""
     query = select(AuditEvent).order_by(AuditEvent.id.desc())
     if not viewer.has_role(Role.OFFICER):

@@ -72,7 +72,7 @@ def get_job(actor: User | None, job_id: str) -> Job:
     return job
 
 
-def visible_jobs(actor: User | None, *, state: str | None = None) -> Select[tuple[Job]]:
+def visible_jobs(actor: User | None, *, state: str | None = None) -> Select[Job]:
     """Return a query for the jobs the actor may see, newest first."""
     query = select(Job).order_by(Job.created_at.desc(), Job.id)
     if actor is not None and not actor.has_role(Role.OFFICER):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 
 from email_validator import EmailNotValidError, validate_email
@@ -16,6 +17,12 @@ from cloudsim.extensions import db
 from cloudsim.models import ConstellationState, Role, Team, User
 
 TEAM_NAME_MAX = 80
+
+
+class Keep(enum.Enum):
+    """Marks an argument left out of an update, where None would mean "clear it"."""
+
+    KEEP = "keep"
 
 
 def normalise_email(email: str) -> str:
@@ -224,7 +231,7 @@ def update_user(
     *,
     name: str | None = None,
     role: str | Role | None = None,
-    team_id: int | type[...] | None = ...,
+    team_id: int | Keep | None = Keep.KEEP,
     active: bool | None = None,
     password: str | None = None,
 ) -> User:
@@ -238,11 +245,11 @@ def update_user(
         raise Forbidden("you cannot change your own role or disable yourself")
     if new_role != user.role and user.role == Role.ADMIN:
         _ensure_another_admin(user)
-    if role is not None or team_id is not ...:
-        wanted_team = user.team_id if team_id is ... else team_id
-        if new_role != Role.USER and team_id is ...:
+    if role is not None or team_id is not Keep.KEEP:
+        wanted_team = user.team_id if team_id is Keep.KEEP else team_id
+        if new_role != Role.USER and team_id is Keep.KEEP:
             wanted_team = None  # promoting a team user to officer takes them out of the team
-        user.team_id = _team_for_role(new_role, wanted_team)  # type: ignore[arg-type]
+        user.team_id = _team_for_role(new_role, wanted_team)
         user.role = new_role
         changes.update(role=new_role.value, team_id=user.team_id)
     if name is not None:
