@@ -3,7 +3,7 @@
 import datetime
 import functools
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Concatenate, ParamSpec, TypeVar
 
@@ -73,6 +73,7 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
         public_cidr: str = "198.18.0.0/24",
         prefix: str = "cs",
         boot_timeout: float = DEFAULT_BOOT_TIMEOUT_SECONDS,
+        hidden_paths: Sequence[str] = (),
     ) -> None:
         super().__init__(key=key, secret=secret)
         state_path = Path(state_dir)
@@ -89,7 +90,15 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
             subnet_pool=parse_subnet(subnet_pool, max_prefixlen=24),
             public_subnet=parse_subnet(public_cidr),
         )
-        self._nodes = NodeManager(self._store, self._networks, boot_timeout)
+        # Hosts see this machine's "/" as their lower layer: keep the controller's secrets
+        # (state_dir, whatever the caller names, e.g. the app's instance folder) out of sight.
+        hidden = [*host.DEFAULT_HIDDEN_PATHS, state_dir, *hidden_paths]
+        self._nodes = NodeManager(
+            self._store,
+            self._networks,
+            boot_timeout=boot_timeout,
+            hidden_paths=tuple(dict.fromkeys(Path(path).resolve() for path in hidden)),
+        )
 
     @property
     def hosts_dir(self) -> Path:

@@ -1,7 +1,9 @@
 """Start and stop one host: overlay root, first boot, then systemd-nspawn -b or tini + sshd."""
 
+import os
 import re
 import shutil
+import stat
 import subprocess
 import time
 from dataclasses import dataclass
@@ -9,7 +11,7 @@ from pathlib import Path
 
 from provisioners.local import processes
 from provisioners.local.commands import run_command
-from provisioners.local.errors import HostBootError
+from provisioners.local.errors import HostBootError, InvalidRequestError
 from provisioners.local.netns import can_connect, netns_path
 from provisioners.local.processes import ProcessId
 
@@ -42,6 +44,13 @@ first_boot() {
   rm -f "$root"/etc/ssh/ssh_host_*
   ssh-keygen -q -A -f "$root"
   install -d -m 700 "$root/root/.ssh"
+  # /root is hidden from the host (see hide_paths): give root its stock dotfiles back.
+  local dotfile
+  for dotfile in bashrc profile; do
+    if [ -e "/usr/share/base-files/dot.$dotfile" ] && [ ! -e "$root/root/.$dotfile" ]; then
+      install -m 644 "/usr/share/base-files/dot.$dotfile" "$root/root/.$dotfile"
+    fi
+  done
   install -m 600 "$authorized_keys" "$root/root/.ssh/authorized_keys"
   local unit
   for unit in "$@"; do ln -sfn /dev/null "$root/etc/systemd/system/$unit"; done
@@ -98,6 +107,20 @@ exec systemd-nspawn --quiet --directory="$root" --boot --machine="$machine" \
 # Records the launcher's PID (as seen from the root namespace) before becoming the launcher.
 _LAUNCHER = 'set -eu\nprintf "%s\\n" "$$" > "$1"\nshift\nexec "$@"\n'
 
+# Paths of the controller that no host may read through the overlay's lower layer "/":
+# its users' keys and dotfiles, server data, scratch space.
+DEFAULT_HIDDEN_PATHS = (
+    "/root",
+    "/home",
+    "/srv",
+    "/tmp",  # noqa: S108 (hidden from hosts, not used)
+    "/var/tmp",  # noqa: S108 (hidden from hosts, not used)
+    "/var/backups",
+    "/var/lib/postgresql",
+    "/var/lib/redis",
+)
+OPAQUE_XATTR = "trusted.overlay.opaque"
+
 _ANSI_ESCAPE = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")
 
 
@@ -112,6 +135,7 @@ class HostSpec:
     host_dir: Path
     node_dir: Path
     machine_id: str
+    hidden_paths: tuple[Path, ...] = ()
 
     @property
     def boot_log(self) -> Path:
@@ -152,6 +176,37 @@ def units_to_mask(systemd_dir: Path = Path("/etc/systemd/system")) -> list[str]:
     return sorted(units)
 
 
+def hide_paths(upper: Path, hidden: tuple[Path, ...]) -> None:
+    """Mask the lower layer at each path: an opaque empty directory, or a whiteout for files."""
+    for path in hidden:
+        if not path.is_absolute() or path == Path("/"):
+            raise InvalidRequestError(f"cannot hide {str(path)!r} from hosts")
+        try:
+            lower = os.lstat(path)
+        except FileNotFoundError:
+            continue
+        for ancestor in reversed(path.parents[:-1]):
+            _mirror_directory(upper, ancestor)
+        target = upper / path.relative_to("/")
+        if stat.S_ISDIR(lower.st_mode):
+            _mirror_directory(upper, path)
+            os.setxattr(target, OPAQUE_XATTR, b"y")
+        elif not os.path.lexists(target):
+            # A 0/0 character device is overlayfs's whiteout: the file does not exist above.
+            os.mknod(target, stat.S_IFCHR | 0o000, os.makedev(0, 0))
+
+
+def _mirror_directory(upper: Path, path: Path) -> None:
+    """Create path in the upper dir with the lower directory's mode and owner."""
+    target = upper / path.relative_to("/")
+    if target.exists():
+        return
+    lower = os.stat(path)
+    target.mkdir()
+    os.chown(target, lower.st_uid, lower.st_gid)
+    target.chmod(stat.S_IMODE(lower.st_mode))
+
+
 def launch_command(spec: HostSpec, masked_units: list[str]) -> list[str]:
     """Return the argv that boots the host and records the launcher's PID."""
     common = [str(spec.host_dir), spec.hostname, spec.machine, spec.machine_id]
@@ -177,8 +232,11 @@ def start_host(spec: HostSpec, timeout: float) -> HostProcesses:
     """Launch the host and return once its init runs; raise HostBootError otherwise."""
     for directory in ("upper", "work", "root"):
         (spec.host_dir / directory).mkdir(parents=True, exist_ok=True)
-    # The upper dir's mode becomes the mode of the host's "/": it must match the real one.
-    (spec.host_dir / "upper").chmod(0o755)
+    upper = spec.host_dir / "upper"
+    if not any(upper.iterdir()):
+        # The upper dir's mode becomes the mode of the host's "/": it must match the real one.
+        upper.chmod(0o755)
+        hide_paths(upper, spec.hidden_paths)
     masked = units_to_mask() if spec.init == INIT_SYSTEMD else []
     with open(spec.boot_log, "ab") as log:
         subprocess.run(

@@ -42,10 +42,18 @@ class NodeRequest:
 class NodeManager:
     """Create, reboot and destroy hosts, keeping their records in the state store."""
 
-    def __init__(self, store: StateStore, networks: NetworkManager, boot_timeout: float) -> None:
+    def __init__(
+        self,
+        store: StateStore,
+        networks: NetworkManager,
+        *,
+        boot_timeout: float,
+        hidden_paths: tuple[Path, ...],
+    ) -> None:
         self._store = store
         self._networks = networks
         self._boot_timeout = boot_timeout
+        self._hidden_paths = hidden_paths
 
     def create(self, request: NodeRequest) -> NodeRecord:
         """Reserve, wire and boot a host; on any failure remove everything it made."""
@@ -120,6 +128,7 @@ class NodeManager:
             host_dir=self._store.host_dir(record.name),
             node_dir=self._store.node_dir(record.name),
             machine_id=record.machine_id,
+            hidden_paths=self._hidden_paths,
         )
 
     def _reserve(self, request: NodeRequest) -> NodeRecord:

@@ -55,11 +55,27 @@ def state_dir(host_prefix: str) -> Iterator[Path]:
 
 
 @pytest.fixture(scope="session")
-def make_driver(state_dir: Path, host_prefix: str) -> Callable[[], LocalNodeDriver]:
+def controller_secret(state_dir: Path, host_prefix: str) -> Iterator[Path]:
+    """Make a file that stands for the app's secrets: hosts must not be able to read it."""
+    directory = Path(tempfile.mkdtemp(prefix=f"{host_prefix}-instance-", dir="/var/lib"))
+    secret = directory / "encryption.key"
+    secret.write_text("not for hosts\n")
+    yield secret
+    shutil.rmtree(directory)
+
+
+@pytest.fixture(scope="session")
+def make_driver(
+    state_dir: Path, host_prefix: str, controller_secret: Path
+) -> Callable[[], LocalNodeDriver]:
     """Return a factory of fresh drivers sharing the session's state_dir and prefix."""
 
     def build() -> LocalNodeDriver:
-        return LocalNodeDriver(state_dir=str(state_dir), prefix=host_prefix)
+        return LocalNodeDriver(
+            state_dir=str(state_dir),
+            prefix=host_prefix,
+            hidden_paths=[str(controller_secret.parent)],
+        )
 
     return build
 

@@ -93,6 +93,22 @@ def test_each_host_has_its_own_etc(lan: Lan, ssh_key: SshKey, shells: Shells) ->
     assert not Path(marker).exists()
 
 
+def test_controller_secrets_are_hidden_from_hosts(
+    lan: Lan, ssh_key: SshKey, shells: Shells, controller_secret: Path, state_dir: Path
+) -> None:
+    assert controller_secret.exists()
+    for node in (lan.router, lan.sim):
+        shell = shells(node, ssh_key)
+        for path in (controller_secret, state_dir / ".lock"):
+            assert shell.run(f"test -e {path}")[0] == 1, f"{path} is visible on {node.name}"
+        assert shell.run(f"ls -A {controller_secret.parent}")[1].strip() == ""
+        assert sorted(shell.check("ls -A /root").split()) == [".bashrc", ".profile", ".ssh"]
+        assert shell.check("ls -A /root/.ssh").split() == ["authorized_keys"]
+        assert shell.check("ls -A /home").strip() == ""
+        # The rest of the machine's root is there: hosts run its programs.
+        shell.check("test -x /usr/sbin/sshd && test -s /etc/os-release")
+
+
 def test_pid_1_is_the_hosts_own_init(lan: Lan, ssh_key: SshKey, shells: Shells) -> None:
     router, sim = shells(lan.router, ssh_key), shells(lan.sim, ssh_key)
     assert router.check("cat /proc/1/comm").strip() == "systemd"
