@@ -1,0 +1,103 @@
+"""Instance requests: tags, addresses and the RunInstances parameters of one machine."""
+
+import ipaddress
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from provisioners.ec2.api import (
+    CONSTELLATION_TAG,
+    NAME_TAG,
+    NETWORK_TAG,
+    ROLE_TAG,
+    numbered,
+    tag_specification,
+)
+from provisioners.ec2.errors import InvalidRequestError
+from provisioners.ec2.networks import EC2ConstellationNetwork
+
+NOT_TERMINATED_STATES = ["pending", "running", "stopping", "stopped"]
+# AWS keeps the first four addresses and the last one of every subnet.
+_RESERVED_AT_START = 4
+
+
+@dataclass(frozen=True)
+class InstanceRequest:
+    """Everything RunInstances needs to launch one machine of a constellation."""
+
+    name: str
+    image_id: str
+    size_id: str
+    key_name: str
+    subnet_id: str
+    private_ip: str | None
+    public: bool
+    security_group_id: str | None
+    tags: dict[str, str]
+
+    def params(self) -> dict[str, str]:
+        """Return the RunInstances parameters for this request."""
+        params = {
+            "ImageId": self.image_id,
+            "InstanceType": self.size_id,
+            "MinCount": "1",
+            "MaxCount": "1",
+            "KeyName": self.key_name,
+            **tag_specification("instance", self.tags),
+        }
+        placement = {"SubnetId": self.subnet_id}
+        if self.private_ip is not None:
+            placement["PrivateIpAddress"] = self.private_ip
+        group_ids = [self.security_group_id] if self.security_group_id else []
+        if self.public:
+            # A public address can only be asked for on an explicit network interface.
+            root = "NetworkInterface.1"
+            params.update({f"{root}.{key}": value for key, value in placement.items()})
+            params.update(numbered(f"{root}.SecurityGroupId", group_ids))
+            params[f"{root}.DeviceIndex"] = "0"
+            params[f"{root}.AssociatePublicIpAddress"] = "true"
+            params[f"{root}.DeleteOnTermination"] = "true"
+        else:
+            params.update(placement)
+            params.update(numbered("SecurityGroupId", group_ids))
+        return params
+
+
+def instance_tags(
+    name: str,
+    network: EC2ConstellationNetwork,
+    tags: Mapping[str, str] | None,
+    role: str | None,
+) -> dict[str, str]:
+    """Return the instance's tags: the caller's plus Name, network, constellation and role."""
+    merged = dict(tags or {})
+    for key, value in merged.items():
+        if not isinstance(key, str) or not isinstance(value, str):
+            raise InvalidRequestError(f"ex_tags must map str to str (got {key!r}: {value!r})")
+    for key, value in ((NAME_TAG, name), (ROLE_TAG, role), (NETWORK_TAG, network.name)):
+        if value is None:
+            continue
+        if merged.get(key, value) != value:
+            raise InvalidRequestError(f"ex_tags[{key!r}] is {merged[key]!r}, not {value!r}")
+        merged[key] = value
+    merged.setdefault(CONSTELLATION_TAG, network.name)
+    return merged
+
+
+def check_private_ip(private_ip: str | None, network: EC2ConstellationNetwork) -> str | None:
+    """Return private_ip if EC2 can give it to a machine in network's subnet, else raise."""
+    if private_ip is None:
+        return None
+    try:
+        address = ipaddress.IPv4Address(private_ip)
+    except ValueError:
+        raise InvalidRequestError(
+            f"ex_private_ip must be an IPv4 address, got {private_ip!r}"
+        ) from None
+    subnet = ipaddress.IPv4Network(network.cidr)
+    usable_first = subnet.network_address + _RESERVED_AT_START
+    if not usable_first <= address < subnet.broadcast_address:
+        raise InvalidRequestError(
+            f"ex_private_ip {address} is not usable in {subnet} (AWS reserves the first four "
+            "addresses and the last)"
+        )
+    return str(address)

@@ -1,0 +1,91 @@
+"""Fixtures for the EC2 provider: one in-process moto EC2 server per session, drivers on it."""
+
+import itertools
+import logging
+import re
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import pytest
+from cryptography.hazmat.primitives import serialization
+from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+from libcloud.compute.base import NodeImage, NodeSize
+from moto.server import ThreadedMotoServer
+
+from provisioners.ec2.driver import CloudSimEC2NodeDriver
+
+ACCESS_KEY_ID = "AKIDCLOUDSIMTEST"
+SECRET_ACCESS_KEY = "cloudsim-test-secret-0123456789"
+SIZE_ID = "t3.micro"
+_names = itertools.count(1)
+
+
+@dataclass(frozen=True)
+class MotoEndpoint:
+    """Where the session's moto server listens."""
+
+    host: str
+    port: int
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}"
+
+
+@pytest.fixture(scope="session")
+def moto_endpoint() -> Iterator[MotoEndpoint]:
+    # moto's request log is noise in test output; failures surface as EC2 errors instead.
+    logging.getLogger("werkzeug").setLevel(logging.ERROR)
+    server = ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
+    server.start()
+    host, port = server.get_host_and_port()
+    yield MotoEndpoint(host, port)
+    server.stop()
+
+
+@pytest.fixture
+def make_driver(moto_endpoint: MotoEndpoint) -> Callable[..., CloudSimEC2NodeDriver]:
+    """Build drivers pointed at moto; credentials default to the test pair."""
+
+    def build(
+        key: str = ACCESS_KEY_ID, secret: str = SECRET_ACCESS_KEY, **kwargs: object
+    ) -> CloudSimEC2NodeDriver:
+        options: dict[str, object] = {
+            "host": moto_endpoint.host,
+            "port": moto_endpoint.port,
+            "secure": False,
+            **kwargs,
+        }
+        return CloudSimEC2NodeDriver(key, secret, **options)
+
+    return build
+
+
+@pytest.fixture
+def driver(make_driver: Callable[..., CloudSimEC2NodeDriver]) -> CloudSimEC2NodeDriver:
+    return make_driver()
+
+
+@pytest.fixture
+def network_name(request: pytest.FixtureRequest) -> str:
+    """Return a network name no other test uses (the moto server lives for the session)."""
+    label = re.sub(r"[^a-z0-9]+", "-", request.node.name.lower())[:24].strip("-")
+    return f"t{next(_names)}-{label}"
+
+
+@pytest.fixture(scope="session")
+def public_key() -> str:
+    key = Ed25519PrivateKey.generate().public_key()
+    encoded = key.public_bytes(serialization.Encoding.OpenSSH, serialization.PublicFormat.OpenSSH)
+    return encoded.decode() + " cloudsim-test"
+
+
+@pytest.fixture
+def size(driver: CloudSimEC2NodeDriver) -> NodeSize:
+    return next(size for size in driver.list_sizes() if size.id == SIZE_ID)
+
+
+@pytest.fixture
+def image(driver: CloudSimEC2NodeDriver) -> NodeImage:
+    images: list[NodeImage] = driver.list_images(ex_owner="amazon")
+    return images[0]
