@@ -3,6 +3,7 @@
 import os
 import re
 import shutil
+import signal
 import stat
 import subprocess
 import time
@@ -286,12 +287,17 @@ def wait_for_sshd(spec: HostSpec, host: HostProcesses, timeout: float) -> None:
 
 def stop_host(launcher: ProcessId | None, init: ProcessId | None) -> None:
     """Kill the host's init (its whole PID namespace dies) and wait for the launcher to exit."""
+    launcher_frozen = False
     if init is None and launcher is not None and processes.is_alive(launcher):
+        # Init was never recorded: freeze the launcher so it cannot start one while we look.
+        launcher_frozen = processes.signal_process(launcher, signal.SIGSTOP)
         init = processes.find_namespace_init(launcher)
     if init is not None:
         processes.kill(init, KILL_WAIT_SECONDS)
-    # nspawn tidies up after its container died; only a stuck launcher gets SIGKILL.
-    if launcher is not None and not processes.wait_until_gone(launcher, LAUNCHER_EXIT_SECONDS):
+    if launcher is None:
+        return
+    # nspawn tidies up after its container died; only a stuck or frozen launcher gets SIGKILL.
+    if launcher_frozen or not processes.wait_until_gone(launcher, LAUNCHER_EXIT_SECONDS):
         processes.kill(launcher, KILL_WAIT_SECONDS)
 
 

@@ -82,6 +82,7 @@ class NodeManager:
         host.stop_host(record.launcher, record.init_process)
         record.launcher = record.init_process = None
         record.status = STATUS_CREATING
+        record.creator = processes.identify(os.getpid())
         spec = self.host_spec(record)
         spec.launcher_pidfile.unlink(missing_ok=True)
         self._boot(record, spec)
@@ -203,12 +204,15 @@ class NodeManager:
 
 def node_state(record: NodeRecord) -> NodeState:
     """Map a record and the liveness of its processes to libcloud's NodeState."""
+    if record.status == STATUS_CREATING and not (
+        record.creator is not None and processes.is_alive(record.creator)
+    ):
+        # The create_node (or reboot) that owned it died half-way: nobody will finish it.
+        return NodeState.ERROR
     if record.init_process is not None and processes.is_alive(record.init_process):
         return NodeState.RUNNING if record.status == STATUS_RUNNING else NodeState.PENDING
     if record.status == STATUS_CREATING:
-        creator_alive = record.creator is not None and processes.is_alive(record.creator)
-        # A create_node whose process died half-way left a node nobody will finish.
-        return NodeState.PENDING if creator_alive else NodeState.ERROR
+        return NodeState.PENDING
     return NodeState.STOPPED
 
 

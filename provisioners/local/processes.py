@@ -89,13 +89,20 @@ def wait_until_gone(process: ProcessId, timeout: float) -> bool:
     return True
 
 
+def signal_process(process: ProcessId, signal_number: int) -> bool:
+    """Send a signal to the recorded process if it still runs; say whether it was sent."""
+    if not is_alive(process):
+        return False
+    try:
+        os.kill(process.pid, signal_number)
+    except ProcessLookupError:
+        return False
+    return True
+
+
 def kill(process: ProcessId, timeout: float) -> None:
     """SIGKILL the recorded process if it still runs and wait until it is gone."""
-    if not is_alive(process):
-        return
-    try:
-        os.kill(process.pid, signal.SIGKILL)
-    except ProcessLookupError:
+    if not signal_process(process, signal.SIGKILL):
         return
     if not wait_until_gone(process, timeout):
         raise HostStopError(f"process {process.pid} survived SIGKILL for {timeout:.0f} s")

@@ -3,6 +3,7 @@
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Callable
 from ipaddress import ip_network
 from pathlib import Path
@@ -184,7 +185,7 @@ def test_reboot_keeps_files_host_key_and_addresses(
     network = driver.ex_create_network("again", cidr="10.212.10.0/24", ex_gateway="10.212.10.1")
     assert network.gateway == "10.212.10.1"
     tenth = "10.212.10.9"
-    node = _create(driver, "again", network, ssh_key, ex_private_ip=tenth, ex_init="minimal")
+    node = _create(driver, "again", network, ssh_key, ex_private_ip=tenth, ex_init="systemd")
     try:
         assert node.private_ips == [tenth]
         with pytest.raises(NameInUseError):
@@ -226,6 +227,49 @@ def test_a_host_whose_init_died_is_stopped_and_still_destroyed_cleanly(
         driver.destroy_node(node)
         driver.ex_destroy_network(network)
     _assert_nothing_left(node, state_dir, host_prefix, recorded)
+
+
+_CREATE_IN_CHILD = """
+import sys
+from libcloud.compute.base import NodeAuthSSHKey
+from provisioners.local.driver import LocalNodeDriver
+state_dir, prefix, public_key = sys.argv[1:4]
+driver = LocalNodeDriver(state_dir=state_dir, prefix=prefix)
+network = driver.ex_get_network("orphan")
+driver.create_node("orphan", None, None, auth=NodeAuthSSHKey(public_key), ex_network=network)
+"""
+
+
+def test_a_node_whose_creator_was_killed_is_error_and_destroyed_cleanly(
+    driver: LocalNodeDriver, ssh_key: SshKey, state_dir: Path, host_prefix: str
+) -> None:
+    network = driver.ex_create_network("orphan")
+    pidfile = state_dir / host_prefix / "nodes" / "orphan" / "launcher.pid"
+    creator = subprocess.Popen(
+        [sys.executable, "-c", _CREATE_IN_CHILD, str(state_dir), host_prefix, ssh_key.public_line]
+    )
+    try:
+        deadline = time.monotonic() + 30
+        while not (pidfile.exists() and pidfile.read_text().endswith("\n")):
+            assert creator.poll() is None, "create_node ended before it launched the host"
+            assert time.monotonic() < deadline, "the host was never launched"
+            time.sleep(0.01)
+        launcher = processes.identify(int(pidfile.read_text()))
+        # The orchestrator dies in the middle of create_node.
+        creator.kill()
+        creator.wait()
+        [orphan] = driver.list_nodes()
+        assert orphan.state == NodeState.ERROR
+        driver.destroy_node(orphan)
+        assert launcher is None or not processes.is_alive(launcher)
+        assert driver.list_nodes() == []
+        assert f"{host_prefix}-h-orphan" not in list_namespaces(f"{host_prefix}-")
+        assert mounts_under(state_dir) == []
+    finally:
+        if creator.poll() is None:
+            creator.kill()
+            creator.wait()
+        driver.ex_destroy_network(network)
 
 
 def test_catalogue_has_one_size_image_and_location(driver: LocalNodeDriver) -> None:
