@@ -134,9 +134,7 @@ def decode_command(raw: bytes) -> dict[str, Any]:
     if len(raw) > MAX_MESSAGE_BYTES:
         raise ProtocolError(f"message of {len(raw)} bytes exceeds {MAX_MESSAGE_BYTES}")
     try:
-        message = msgpack.unpackb(
-            raw, raw=False, strict_map_key=True, max_buffer_size=MAX_MESSAGE_BYTES
-        )
+        message = msgpack.unpackb(raw, raw=False, strict_map_key=True)
     except (
         ValueError,
         TypeError,

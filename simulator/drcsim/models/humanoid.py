@@ -73,8 +73,16 @@ def _right(row: tuple) -> tuple:  # type: ignore[type-arg]
     def flip(link: str) -> str:
         return "r_" + link[2:] if link.startswith("l_") else link
 
-    return (flip(name), flip(parent), flip(child), (xyz[0], -xyz[1], xyz[2]), axis, lower, upper,
-            *rest)  # fmt: skip
+    return (
+        flip(name),
+        flip(parent),
+        flip(child),
+        (xyz[0], -xyz[1], xyz[2]),
+        axis,
+        lower,
+        upper,
+        *rest,
+    )
 
 
 _ROWS = _TRUNK + [r for r in _LEFT_LIMBS if "_leg_" in r[0]]

@@ -1,0 +1,159 @@
+"""Benchmarks and the headless self-test: real-time factor per world, command round trip."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drcsim.client import SimClient
+from drcsim.engine import RunOptions, Simulation
+from drcsim.errors import ClientError, DrcsimError
+from drcsim.protocol import check_command, encode
+from drcsim.sensors import SensorSettings
+from drcsim.worlds import WORLD_NAMES
+
+BENCH_TOPICS = {"lidar", "imu", "camera"}
+
+
+def measure_rtf(world: str, config: str, seconds: float, sensors: bool) -> dict[str, Any]:
+    """Step `world` for `seconds` of simulated time (robot walking); return RTF and falls."""
+    published = {"bytes": 0}
+
+    def publish(_: str, message: dict[str, Any]) -> None:
+        published["bytes"] += len(encode(message))  # encoding is part of the sensor cost
+
+    settings = SensorSettings(lidar_hz=40.0, camera_hz=10.0, camera_width=320, camera_height=240)
+    sim = Simulation(world, config, RunOptions(sensors=settings, publish=publish))
+    try:
+        if sensors:
+            sim.active_topics = set(BENCH_TOPICS)
+        x, y, yaw = sim.spec.robot_start
+        sim.apply_command(
+            check_command({"op": "behaviour", "name": "walk", "pose": [x + 1.0, y, yaw]})
+        )
+        steps = round(seconds / 0.001)
+        started = time.perf_counter()
+        sim.step(steps)
+        wall = time.perf_counter() - started
+        return {
+            "world": world,
+            "sensors": sensors,
+            "sim_s": sim.sim_time,
+            "wall_s": round(wall, 3),
+            "rtf": round(sim.sim_time / wall, 3),
+            "falls": sim.scorer.falls,
+            "published_bytes": published["bytes"],
+        }
+    finally:
+        sim.close()
+
+
+def free_port() -> int:
+    """Return a TCP port on 127.0.0.1 that is free right now."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port: int = probe.getsockname()[1]
+        return port
+
+
+def start_server(
+    world: str,
+    config: str,
+    extra: list[str],
+    log_dir: Path | None = None,
+) -> tuple[subprocess.Popen[bytes], int]:
+    """Start `drcsim serve` on loopback ports; return the process and its command port."""
+    port, publish_port = free_port(), free_port()
+    args = [
+        sys.executable,
+        "-m",
+        "drcsim.cli",
+        "serve",
+        "--world",
+        world,
+        "--config",
+        config,
+        "--bind",
+        "127.0.0.1",
+        "--port",
+        str(port),
+        "--publish-port",
+        str(publish_port),
+        *extra,
+    ]
+    if log_dir is not None:
+        args += ["--log-dir", str(log_dir)]
+    process = subprocess.Popen(args, stdout=subprocess.DEVNULL, env={**os.environ})
+    return process, port
+
+
+def wait_ready(port: int, process: subprocess.Popen[bytes], timeout_s: float = 30.0) -> None:
+    """Wait until the server at `port` answers hello (or its process dies)."""
+    deadline = time.monotonic() + timeout_s
+    with SimClient("127.0.0.1", port, timeout_s=0.5) as client:
+        while time.monotonic() < deadline:
+            if process.poll() is not None:
+                raise DrcsimError(f"server exited with {process.returncode}")
+            try:
+                client.hello()
+                return
+            except ClientError:
+                continue
+    raise DrcsimError("server did not become ready")
+
+
+def measure_round_trip(samples: int) -> dict[str, Any]:
+    """Time command-to-state round trips (step 1 in lock-step) over loopback."""
+    process, port = start_server("vrc_task_2", "1", ["--lockstep"])
+    try:
+        wait_ready(port, process)
+        with SimClient("127.0.0.1", port) as client:
+            client.step(10)
+            times = []
+            for _ in range(samples):
+                started = time.perf_counter()
+                client.step(1)
+                times.append(time.perf_counter() - started)
+            client.stop()
+        ms = np.array(times) * 1000.0
+        return {
+            "samples": samples,
+            "p50_ms": round(float(np.percentile(ms, 50)), 3),
+            "p99_ms": round(float(np.percentile(ms, 99)), 3),
+            "max_ms": round(float(ms.max()), 3),
+        }
+    finally:
+        process.terminate()
+        process.wait(timeout=30)
+
+
+def run_bench(seconds: float, samples: int) -> dict[str, Any]:
+    """Return every benchmark figure."""
+    rtf = [
+        measure_rtf(world, "1", seconds, sensors)
+        for world in WORLD_NAMES
+        for sensors in (False, True)
+    ]
+    return {
+        "rtf": rtf,
+        "round_trip": measure_round_trip(samples),
+        "sensors": "lidar 40 Hz 1081 beams + IMU 100 Hz + camera 320x240 10 Hz",
+        "cpu_count": os.cpu_count(),
+    }
+
+
+def selftest(
+    world: str, config: str, seconds: float, sensors: bool, min_rtf: float
+) -> dict[str, Any]:
+    """Load a world, step it headless, and report whether it ran at the required RTF."""
+    result = measure_rtf(world, config, seconds, sensors)
+    result["ok"] = result["falls"] == 0 and result["rtf"] >= min_rtf
+    result["min_rtf"] = min_rtf
+    return result

@@ -1,0 +1,193 @@
+"""The drcsim command: serve, replay, selftest, bench, example-controller, worlds."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import sys
+from pathlib import Path
+from typing import Any
+
+from drcsim.errors import DrcsimError
+from drcsim.worlds import CONFIG_NAMES, WORLD_NAMES, load_world
+
+
+def _sensor_settings(pairs: list[str]) -> Any:
+    from drcsim.sensors import SensorSettings
+
+    values = {}
+    for pair in pairs:
+        key, _, value = pair.partition("=")
+        values[key] = value
+    try:
+        return SensorSettings.from_mapping(values)
+    except (KeyError, ValueError) as exc:
+        raise DrcsimError(f"bad --sensor setting: {exc}") from exc
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    """Serve a world until its run ends or SIGTERM/SIGINT."""
+    from drcsim.engine import RunOptions, Simulation
+    from drcsim.server import ServerSettings, SimServer
+
+    options = RunOptions(
+        log_dir=args.log_dir, time_limit_s=args.time_limit, sensors=_sensor_settings(args.sensor)
+    )
+    settings = ServerSettings(
+        bind=args.bind,
+        command_port=args.port,
+        publish_port=args.publish_port or args.port + 1,
+        allow=args.allow or ["127.0.0.1/32"],
+        lockstep=args.lockstep,
+        linger_s=args.linger,
+    )
+    sim = Simulation(args.world, args.config, options)
+    server = SimServer(sim, settings)
+    signal.signal(signal.SIGTERM, lambda *_: server.stop())
+    signal.signal(signal.SIGINT, lambda *_: server.stop())
+    print(
+        f"drcsim: serving {args.world} config {args.config} on tcp://{args.bind}:{args.port} "
+        f"(topics on {settings.publish_port}, lockstep={args.lockstep})",
+        flush=True,
+    )
+    try:
+        server.run()
+    finally:
+        server.close()
+    print(
+        json.dumps(
+            {
+                "end_reason": sim.scorer.end_reason,
+                "score": sim.scorer.reached,
+                "falls": sim.scorer.falls,
+                "sim_time": sim.sim_time,
+                "rejected": server.stats.rejected,
+                "refused": server.stats.refused,
+            }
+        )
+    )
+    return 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Re-simulate a logged run and check its final state."""
+    from drcsim.replay import replay
+
+    result = replay(args.log).as_dict()
+    print(json.dumps(result) if args.json else f"replay OK: {result}")
+    return 0
+
+
+def cmd_selftest(args: argparse.Namespace) -> int:
+    """Headless short run for provisioning checks."""
+    from drcsim.bench import selftest
+
+    result = selftest(args.world, args.config, args.seconds, not args.no_sensors, args.min_rtf)
+    print(
+        json.dumps(result)
+        if args.json
+        else f"{'OK' if result['ok'] else 'FAIL'} rtf={result['rtf']} falls={result['falls']}"
+    )
+    return 0 if result["ok"] else 1
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    """Measure RTF per world with and without sensors, and the lock-step round trip."""
+    from drcsim.bench import run_bench
+
+    result = run_bench(args.seconds, args.samples)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        for row in result["rtf"]:
+            print(f"{row['world']:<11} sensors={row['sensors']!s:<5} rtf={row['rtf']}")
+        print(f"round trip: {result['round_trip']}")
+    return 0
+
+
+def cmd_example(args: argparse.Namespace) -> int:
+    """Run the example team controller against a server."""
+    from drcsim.client import SimClient
+    from drcsim.example_controller import ExampleController
+
+    with SimClient(args.server, args.port, timeout_s=10.0) as client:
+        controller = ExampleController(
+            client, log=lambda line: print(line, file=sys.stderr), timeout_s=args.timeout
+        )
+        if args.world and controller.info["world"] != args.world:
+            raise DrcsimError(f"the server runs {controller.info['world']}, not {args.world}")
+        score = controller.run()
+    print(json.dumps(score))
+    return 0
+
+
+def cmd_worlds(_: argparse.Namespace) -> int:
+    """List the worlds and their run configurations."""
+    for name in WORLD_NAMES:
+        for config in CONFIG_NAMES:
+            spec = load_world(name, config)
+            print(f"{name} {config} seed={spec.seed} start={list(spec.robot_start)}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser."""
+    parser = argparse.ArgumentParser(prog="drcsim", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    serve = sub.add_parser("serve", help="serve a world over the network")
+    serve.add_argument("--world", required=True, choices=WORLD_NAMES)
+    serve.add_argument("--config", default="1", choices=CONFIG_NAMES)
+    serve.add_argument("--bind", default="127.0.0.1", help="address to listen on")
+    serve.add_argument("--port", type=int, default=7700, help="command port")
+    serve.add_argument("--publish-port", type=int, default=None, help="topics (default port+1)")
+    serve.add_argument("--allow", action="append", help="allowed client address or network")
+    serve.add_argument("--lockstep", action="store_true", help="advance only on step commands")
+    serve.add_argument("--log-dir", type=Path, default=None, help="where to write the run logs")
+    serve.add_argument("--time-limit", type=float, default=None, help="simulated seconds")
+    serve.add_argument("--sensor", action="append", default=[], help="sensor setting KEY=VALUE")
+    serve.add_argument("--linger", type=float, default=1.0, help="seconds to serve after the end")
+    serve.set_defaults(func=cmd_serve)
+    rep = sub.add_parser("replay", help="re-simulate a logged run and check it")
+    rep.add_argument("log", type=Path)
+    rep.add_argument("--json", action="store_true")
+    rep.set_defaults(func=cmd_replay)
+    test = sub.add_parser("selftest", help="headless short run (provisioning check)")
+    test.add_argument("--world", default="vrc_task_2", choices=WORLD_NAMES)
+    test.add_argument("--config", default="1", choices=CONFIG_NAMES)
+    test.add_argument("--seconds", type=float, default=2.0)
+    test.add_argument("--no-sensors", action="store_true")
+    test.add_argument("--min-rtf", type=float, default=1.0)
+    test.add_argument("--json", action="store_true")
+    test.set_defaults(func=cmd_selftest)
+    bench = sub.add_parser("bench", help="RTF per world and command round trip")
+    bench.add_argument("--seconds", type=float, default=5.0)
+    bench.add_argument("--samples", type=int, default=2000)
+    bench.add_argument("--json", action="store_true")
+    bench.set_defaults(func=cmd_bench)
+    example = sub.add_parser("example-controller", help="run the example team controller")
+    example.add_argument("--server", required=True)
+    example.add_argument("--port", type=int, default=7700)
+    example.add_argument("--world", choices=WORLD_NAMES)
+    example.add_argument("--timeout", type=float, default=900.0, help="wall seconds")
+    example.set_defaults(func=cmd_example)
+    worlds = sub.add_parser("worlds", help="list worlds and run configurations")
+    worlds.set_defaults(func=cmd_worlds)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the drcsim command."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="drcsim %(levelname)s %(name)s: %(message)s")
+    try:
+        code: int = args.func(args)
+    except DrcsimError as exc:
+        print(f"drcsim: error: {exc}", file=sys.stderr)
+        return 1
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

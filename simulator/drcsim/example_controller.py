@@ -1,0 +1,157 @@
+"""An example team controller: drives each task through the client library only.
+
+It uses the course briefing from the hello reply (where the vehicle, gates, table, hose and
+standpipe were placed at the start) the way a team would use its perception, and the
+server's behaviours for balance, walking and reaching.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+from drcsim.client import SimClient
+from drcsim.errors import ClientError
+
+Log = Callable[[str], None]
+
+
+def _yaw(orientation: list[float]) -> float:
+    x, y, z, w = orientation
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+class ExampleController:
+    """Runs one task to completion (or as far as it gets) over a SimClient."""
+
+    def __init__(self, client: SimClient, log: Log = lambda _: None, timeout_s: float = 600.0):
+        self.client = client
+        self.log = log
+        self.info = client.hello()
+        self.lockstep = bool(self.info["lockstep"])
+        self.deadline = time.monotonic() + timeout_s
+
+    # -- time -------------------------------------------------------------------------------
+    def advance(self, seconds: float) -> dict[str, Any]:
+        """Let `seconds` of simulated time pass; return the state after them."""
+        if self.lockstep:
+            return self.client.step(max(1, round(seconds / self.info["timestep"])))
+        start = self.client.state()["t"]
+        while True:
+            time.sleep(0.02)  # real-time server: simulated time advances on its own
+            state = self.client.state()
+            if state["t"] - start >= seconds or state["score"]["ended"]:
+                return state
+            if time.monotonic() > self.deadline:
+                raise ClientError("example controller ran out of wall time")
+
+    def until(
+        self, done: Callable[[dict[str, Any]], bool], limit_s: float, poll_s: float = 0.25
+    ) -> dict[str, Any]:
+        """Advance until `done(state)` or the run ends or `limit_s` simulated seconds pass."""
+        state = self.client.state()
+        start = state["t"]
+        while not done(state) and not state["score"]["ended"] and state["t"] - start < limit_s:
+            state = self.advance(poll_s)
+        return state
+
+    # -- building blocks --------------------------------------------------------------------
+    def walk(self, x: float, y: float, yaw: float, limit_s: float = 90.0) -> dict[str, Any]:
+        """Walk to a pose and wait until the walk ends."""
+        self.client.behaviour("walk", pose=[x, y, yaw])
+        return self.until(lambda s: s["behaviour"]["walk"] != "walking", limit_s)
+
+    def reach(
+        self, hand: str, target: list[float], limit_s: float = 4.0, **params: Any
+    ) -> dict[str, Any]:
+        """Reach and wait until the hand (or held tool) is there."""
+        self.client.behaviour("reach", hand=hand, target=target, **params)
+        return self.until(
+            lambda s: s["behaviour"]["reach"].get(hand) == "reached", limit_s, poll_s=0.1
+        )
+
+    # -- tasks ------------------------------------------------------------------------------
+    def run(self) -> dict[str, Any]:
+        """Run the task of the server's world; return the final score."""
+        task = {
+            "vrc_task_1": self.driving,
+            "vrc_task_2": self.walking,
+            "vrc_task_3": self.manipulation,
+        }[self.info["world"]]
+        task(self.info["course"])
+        state = self.client.state()
+        self.log(f"score {state['score']}")
+        return dict(state["score"])
+
+    def walking(self, course: dict[str, Any]) -> None:
+        """Task 2: walk through each gate in turn."""
+        for name in sorted(course["gates"]):
+            gx, gy, gyaw = course["gates"][name]["pose"]
+            state = self.walk(gx + 1.0 * math.cos(gyaw), gy + 1.0 * math.sin(gyaw), gyaw)
+            self.log(f"{name}: {state['score']}")
+            if state["score"]["ended"]:
+                return
+
+    def driving(self, course: dict[str, Any]) -> None:
+        """Task 1: get in, drive through both gates, stop, get out, walk to the finish."""
+        door = course["vehicle"]["driver_door"]
+        car_yaw = course["vehicle"]["pose"][2]
+        # Come to the door from the side, not through the vehicle.
+        self.walk(door[0] - 2.5 * math.cos(car_yaw), door[1] - 2.5 * math.sin(car_yaw), car_yaw)
+        self.walk(door[0], door[1], car_yaw)
+        self.client.behaviour("enter_vehicle")
+        self.log(f"seated: {self.advance(0.5)['score']}")
+        for name in ("gate_1", "gate_2"):
+            gx, gy, gyaw = course["gates"][name]["pose"]
+            self._drive_through(gx + 2.5 * math.cos(gyaw), gy + 2.5 * math.sin(gyaw))
+            self.log(f"{name}: {self.client.state()['score']}")
+        self.client.behaviour("drive", direction="neutral", brake=1.0, hand_brake=True)
+        self.advance(2.0)
+        self.client.behaviour("exit_vehicle")
+        gx, gy, gyaw = course["gates"]["gate_3"]["pose"]
+        self.walk(gx + 1.0 * math.cos(gyaw), gy + 1.0 * math.sin(gyaw), gyaw)
+
+    def _drive_through(self, tx: float, ty: float, limit_s: float = 60.0) -> None:
+        state = self.client.state()
+        start = state["t"]
+        while state["t"] - start < limit_s and not state["score"]["ended"]:
+            px, py, _ = state["pelvis"]["position"]
+            yaw = _yaw(state["pelvis"]["orientation"])
+            if (tx - px) * math.cos(yaw) + (ty - py) * math.sin(yaw) < 0.0:
+                return  # the target is behind us: we are through
+            error = math.atan2(ty - py, tx - px) - yaw
+            error = (error + math.pi) % (2 * math.pi) - math.pi
+            self.client.behaviour(
+                "drive",
+                direction="forward",
+                throttle=0.7,
+                steering_wheel=max(-3.0, min(3.0, 7.5 * error)),
+            )
+            state = self.advance(0.1)
+
+    def manipulation(self, course: dict[str, Any]) -> None:
+        """Task 3: pick up the hose, bring it to the inlet, connect it, turn the valve."""
+        hose = course["hose"]["coupler"]
+        inlet = course["standpipe"]["inlet"]
+        valve = course["standpipe"]["valve"]
+        table_x = course["table"]["pose"][0]
+        self.walk(hose[0] - 0.45, hose[1] + 0.3, 0.0)
+        self.reach("right", [hose[0] - 0.25, hose[1], hose[2] + 0.3])
+        self.reach("right", [hose[0], hose[1], hose[2] + 0.04])
+        self.log(f"grasp: {self.client.behaviour('grasp', hand='right')}")
+        self.reach("right", [0.45, -0.3, 0.35], frame="pelvis")
+        self.log(f"lifted: {self.advance(0.5)['score']}")
+        # Back away from the table before heading for the standpipe.
+        side = -1.0 if inlet[1] < hose[1] else 1.0
+        self.walk(table_x - 1.2, hose[1] + side * 1.0, 0.0)
+        self.walk(inlet[0] - 0.45, inlet[1] + 0.3, 0.0)
+        self.reach("right", inlet, tool=True)
+        self.log(f"at the inlet: {self.advance(1.0)['score']}")
+        self.reach("right", [0.3, -0.3, 0.0], frame="pelvis")
+        self.client.behaviour("arm_rest", hand="right")
+        self.walk(valve[0] - 0.5, valve[1] - 0.3, 0.0)
+        self.reach("left", [valve[0] - 0.12, valve[1], valve[2]])
+        self.client.behaviour("turn_valve", hand="left", angle=3.5)
+        self.until(lambda s: s["behaviour"]["valve"] == "idle", 10.0)

@@ -1,0 +1,71 @@
+"""Replay: re-simulate a logged run from t=0 with its seed and command log, then compare."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from drcsim.engine import RunOptions, Simulation
+from drcsim.errors import ReplayMismatch
+from drcsim.runlog import read_commands, read_final, read_meta, read_states, state_digest
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """What a replay found."""
+
+    steps: int
+    states_checked: int
+    final_digest: str
+    score: int
+    end_reason: str | None
+
+    def as_dict(self) -> dict[str, Any]:
+        """Return the result as plain data."""
+        return {
+            "ok": True,
+            "steps": self.steps,
+            "states_checked": self.states_checked,
+            "final_state_sha256": self.final_digest,
+            "score": self.score,
+            "end_reason": self.end_reason,
+        }
+
+
+def replay(log_dir: Path) -> ReplayResult:
+    """Re-simulate the run in `log_dir`; raise ReplayMismatch at the first divergence."""
+    meta, final = read_meta(log_dir), read_final(log_dir)
+    recorded_states = read_states(log_dir)
+    checked = 0
+    sim = Simulation(meta["world"], meta["config"], RunOptions(time_limit_s=meta["time_limit_s"]))
+    if sim.spec.seed != meta["seed"]:
+        raise ReplayMismatch(f"configuration seed is {sim.spec.seed}, the log says {meta['seed']}")
+
+    def advance_to(step: int) -> None:
+        nonlocal checked
+        while sim.step_count < step and not sim.ended:
+            sim.step(min(10 - sim.step_count % 10, step - sim.step_count))
+            if sim.step_count % 10 == 0:
+                record = next(recorded_states, None)
+                if record is None:
+                    raise ReplayMismatch(f"the state log ends before step {sim.step_count}")
+                if record["step"] != sim.step_count or record["state"] != sim.state_vector():
+                    raise ReplayMismatch(
+                        f"state differs at step {sim.step_count} (t = {sim.sim_time:.3f} s)"
+                    )
+                checked += 1
+
+    try:
+        for step, command in read_commands(log_dir):
+            advance_to(step)
+            sim.apply_command(command)
+        advance_to(int(final["step"]))
+        digest = state_digest(sim.state_vector())
+        if sim.step_count != final["step"] or digest != final["state_sha256"]:
+            raise ReplayMismatch(f"final state differs (step {sim.step_count} vs {final['step']})")
+        return ReplayResult(
+            sim.step_count, checked, digest, sim.scorer.reached, sim.scorer.end_reason
+        )
+    finally:
+        sim.client.disconnect()

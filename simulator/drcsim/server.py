@@ -1,0 +1,239 @@
+"""The network API on the sim machine: ZeroMQ + msgpack topics, command channel, lock-step."""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import zmq
+
+from drcsim.engine import Simulation
+from drcsim.errors import ProtocolError
+from drcsim.models.humanoid import ALL_JOINTS
+from drcsim.protocol import BEHAVIOURS, MAX_MESSAGE_BYTES, decode_command, encode
+from drcsim.scene import TIMESTEP
+from drcsim.sensors import SENSOR_TOPICS
+
+log = logging.getLogger("drcsim.server")
+ZAP_ENDPOINT = "inproc://zeromq.zap.01"
+ZAP_DOMAIN = b"drcsim"
+ON_DEMAND_TOPICS = (*SENSOR_TOPICS, "robot_state")
+ALWAYS_TOPICS = ("clock", "score")
+MAX_LAG_STEPS = 200  # beyond this the wall clock is re-anchored: the run is slower than real time
+BATCH_STEPS = 5  # physics steps between looks at the sockets in real-time mode
+
+
+@dataclass
+class ServerSettings:
+    """Where to listen, who may connect and how time advances."""
+
+    bind: str = "127.0.0.1"
+    command_port: int = 7700
+    publish_port: int = 7701
+    allow: list[str] = field(default_factory=lambda: ["127.0.0.1/32"])
+    lockstep: bool = False
+    linger_s: float = 1.0  # keep answering this long after the run ends
+
+
+def parse_networks(entries: list[str]) -> list[ipaddress.IPv4Network | ipaddress.IPv6Network]:
+    """Return the allow-list as networks (single addresses become /32 or /128)."""
+    try:
+        return [ipaddress.ip_network(entry, strict=False) for entry in entries]
+    except ValueError as exc:
+        raise ProtocolError(f"bad allow-list entry: {exc}") from exc
+
+
+@dataclass
+class ServerStats:
+    """Counters a run reports: requests served, rejected messages, refused peers."""
+
+    requests: int = 0
+    rejected: int = 0
+    refused: int = 0
+
+
+class SimServer:
+    """Serves one Simulation until its run ends or `stop()` is called."""
+
+    def __init__(self, sim: Simulation, settings: ServerSettings) -> None:
+        self.sim = sim
+        self.settings = settings
+        self.networks = parse_networks(settings.allow)
+        self.stats = ServerStats()
+        self.running = True
+        self.subscriptions: set[bytes] = set()
+        self.context = zmq.Context()
+        # The ZAP handler must be bound before any socket accepts a connection.
+        self.zap = self.context.socket(zmq.REP)
+        self.zap.bind(ZAP_ENDPOINT)
+        self.router = self.context.socket(zmq.ROUTER)
+        self.publisher = self.context.socket(zmq.XPUB)
+        for sock in (self.router, self.publisher):
+            sock.zap_domain = ZAP_DOMAIN
+            sock.linger = 0
+            sock.setsockopt(zmq.MAXMSGSIZE, 4 * MAX_MESSAGE_BYTES)
+        self.publisher.sndhwm = 200  # a slow subscriber loses old sensor frames, not the run
+        self.router.bind(f"tcp://{settings.bind}:{settings.command_port}")
+        self.publisher.bind(f"tcp://{settings.bind}:{settings.publish_port}")
+        self.poller = zmq.Poller()
+        for sock in (self.zap, self.router, self.publisher):
+            self.poller.register(sock, zmq.POLLIN)
+        sim.options.publish = self.publish
+        self._rtf_mark = (time.monotonic(), sim.step_count)
+        self.rtf = 0.0
+
+    # -- publishing ---------------------------------------------------------------------------
+    def publish(self, topic: str, message: dict[str, Any]) -> None:
+        """Send one message on a topic."""
+        if topic == "clock":
+            message["rtf"] = self.rtf
+        self.publisher.send_multipart([topic.encode(), encode(message)])
+
+    def _update_rtf(self) -> None:
+        now, step = time.monotonic(), self.sim.step_count
+        wall = now - self._rtf_mark[0]
+        if wall >= 1.0:
+            self.rtf = (step - self._rtf_mark[1]) * TIMESTEP / wall
+            self._rtf_mark = (now, step)
+
+    # -- sockets ------------------------------------------------------------------------------
+    def _handle_zap(self) -> None:
+        frames = self.zap.recv_multipart()
+        version, request_id, _domain, address = frames[:4]
+        allowed = False
+        try:
+            peer = ipaddress.ip_address(address.decode())
+            allowed = any(peer in network for network in self.networks)
+        except ValueError:
+            allowed = False
+        if not allowed:
+            self.stats.refused += 1
+            log.warning("refused connection from %s (not in the allow-list)", address.decode())
+        status = (b"200", b"OK") if allowed else (b"400", b"address not allowed")
+        self.zap.send_multipart([version, request_id, *status, b"", b""])
+
+    def _handle_subscription(self) -> None:
+        frame = self.publisher.recv()
+        if not frame:
+            return
+        topic = frame[1:]
+        if frame[0] == 1:
+            self.subscriptions.add(topic)
+        else:
+            self.subscriptions.discard(topic)
+        self.sim.active_topics = {
+            t for t in ON_DEMAND_TOPICS if any(t.encode().startswith(p) for p in self.subscriptions)
+        }
+
+    def _handle_command(self) -> None:
+        frames = self.router.recv_multipart(copy=False)
+        identity = frames[0].bytes
+        peer = frames[-1].get("Peer-Address") if len(frames) > 1 else "?"
+        if len(frames) != 2:
+            self._reject(identity, peer, f"expected one frame, got {len(frames) - 1}")
+            return
+        try:
+            message = decode_command(frames[1].bytes)
+        except ProtocolError as exc:
+            self._reject(identity, peer, str(exc))
+            return
+        self.stats.requests += 1
+        reply = self._serve(message)
+        if "id" in message:
+            reply["id"] = message["id"]
+        self.router.send_multipart([identity, encode(reply)])
+
+    def _reject(self, identity: bytes, peer: str, reason: str) -> None:
+        self.stats.rejected += 1
+        log.warning("rejected message from %s: %s", peer, reason)
+        self.router.send_multipart([identity, encode({"ok": False, "error": reason})])
+
+    def _serve(self, message: dict[str, Any]) -> dict[str, Any]:
+        op = message["op"]
+        if op == "hello":
+            return {"ok": True, **self.describe()}
+        if op == "state":
+            return {"ok": True, "state": self.sim.snapshot()}
+        if op == "step":
+            if not self.settings.lockstep:
+                return {"ok": False, "error": "step is only accepted in lock-step mode"}
+            self.sim.step(message["steps"])
+            return {"ok": True, "state": self.sim.snapshot()}
+        return self.sim.apply_command(message)
+
+    def describe(self) -> dict[str, Any]:
+        """Return what a client needs to know about this run (the hello reply)."""
+        spec = self.sim.spec
+        return {
+            "world": spec.name,
+            "config": spec.config,
+            "title": spec.title,
+            "lockstep": self.settings.lockstep,
+            "timestep": TIMESTEP,
+            "time_limit_s": spec.time_limit_s,
+            "joints": [
+                {
+                    "name": j.name,
+                    "lower": j.lower,
+                    "upper": j.upper,
+                    "velocity": j.velocity,
+                    "effort": j.effort,
+                }
+                for j in ALL_JOINTS
+            ],
+            "behaviours": sorted(BEHAVIOURS),
+            "topics": [*ALWAYS_TOPICS, *ON_DEMAND_TOPICS],
+            "checkpoints": [c["name"] for c in spec.checkpoints],
+            "course": self.sim.scene.course,
+        }
+
+    def _drain(self, timeout_ms: int) -> None:
+        for sock, _ in self.poller.poll(timeout_ms):
+            if sock is self.zap:
+                self._handle_zap()
+            elif sock is self.router:
+                self._handle_command()
+            else:
+                self._handle_subscription()
+
+    # -- main loop ----------------------------------------------------------------------------
+    def run(self, should_stop: Callable[[], bool] = lambda: False) -> None:
+        """Serve until the run ends (plus the linger time), `stop()` or `should_stop()`."""
+        anchor_time, anchor_step = time.monotonic(), self.sim.step_count
+        ended_at: float | None = None
+        while self.running and not should_stop():
+            now = time.monotonic()
+            if self.sim.ended:
+                ended_at = ended_at or now
+                if now - ended_at >= self.settings.linger_s:
+                    break
+                self._drain(10)
+                continue
+            if self.settings.lockstep:
+                self._drain(10)
+                continue
+            due = anchor_step + int((now - anchor_time) / TIMESTEP) - self.sim.step_count
+            if due > MAX_LAG_STEPS:
+                anchor_time, anchor_step = now, self.sim.step_count
+                due = 1
+            if due > 0:
+                self.sim.step(min(due, BATCH_STEPS))
+                self._update_rtf()
+                self._drain(0)
+            else:
+                self._drain(1)
+
+    def stop(self) -> None:
+        """Ask the loop to finish."""
+        self.running = False
+
+    def close(self) -> None:
+        """Close the sockets and the simulation (which finalises its logs)."""
+        self.sim.close()
+        for sock in (self.router, self.publisher, self.zap):
+            sock.close(linger=0)
+        self.context.term()
