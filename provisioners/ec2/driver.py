@@ -6,6 +6,7 @@ from xml.etree.ElementTree import Element
 
 from libcloud.compute.base import Node, NodeAuthSSHKey, NodeImage, NodeLocation, NodeSize
 from libcloud.compute.drivers.ec2 import NAMESPACE, EC2NodeDriver
+from libcloud.compute.types import NodeState
 
 from provisioners.ec2 import keys, networks, security_groups
 from provisioners.ec2.api import CONSTELLATION_TAG, NAME_TAG, EC2Api, tag_params
@@ -199,13 +200,17 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
         return nodes
 
     def destroy_node(self, node: Node) -> bool:
-        """Terminate the node; True also when EC2 no longer knows it."""
+        """Terminate the node; True also when it is already terminated or unknown to EC2."""
+        # Checking first also spares moto a second termination, which it answers with an error.
         try:
-            return bool(super().destroy_node(node))
+            current = self.list_nodes(ex_node_ids=[node.id])
         except EC2APIError as error:
             if error.code in _GONE_INSTANCE_CODES:
                 return True
             raise
+        if not current or current[0].state == NodeState.TERMINATED:
+            return True
+        return bool(super().destroy_node(node))
 
     # -- moto compatibility, harmless against AWS ---------------------------------------------
 

@@ -9,7 +9,6 @@ from provisioners.ec2.api import (
     NAME_TAG,
     NETWORK_TAG,
     ROLE_TAG,
-    numbered,
     tag_specification,
 )
 from provisioners.ec2.errors import InvalidRequestError
@@ -44,21 +43,17 @@ class InstanceRequest:
             "KeyName": self.key_name,
             **tag_specification("instance", self.tags),
         }
-        placement = {"SubnetId": self.subnet_id}
+        # One explicit primary interface: the only way to ask for (or refuse) a public address,
+        # and it spells out DeleteOnTermination (moto otherwise keeps the address in use).
+        root = "NetworkInterface.1"
+        params[f"{root}.DeviceIndex"] = "0"
+        params[f"{root}.SubnetId"] = self.subnet_id
+        params[f"{root}.AssociatePublicIpAddress"] = "true" if self.public else "false"
+        params[f"{root}.DeleteOnTermination"] = "true"
         if self.private_ip is not None:
-            placement["PrivateIpAddress"] = self.private_ip
-        group_ids = [self.security_group_id] if self.security_group_id else []
-        if self.public:
-            # A public address can only be asked for on an explicit network interface.
-            root = "NetworkInterface.1"
-            params.update({f"{root}.{key}": value for key, value in placement.items()})
-            params.update(numbered(f"{root}.SecurityGroupId", group_ids))
-            params[f"{root}.DeviceIndex"] = "0"
-            params[f"{root}.AssociatePublicIpAddress"] = "true"
-            params[f"{root}.DeleteOnTermination"] = "true"
-        else:
-            params.update(placement)
-            params.update(numbered("SecurityGroupId", group_ids))
+            params[f"{root}.PrivateIpAddress"] = self.private_ip
+        if self.security_group_id is not None:
+            params[f"{root}.SecurityGroupId.1"] = self.security_group_id
         return params
 
 

@@ -80,12 +80,26 @@ def public_key() -> str:
     return encoded.decode() + " cloudsim-test"
 
 
-@pytest.fixture
-def size(driver: CloudSimEC2NodeDriver) -> NodeSize:
-    return next(size for size in driver.list_sizes() if size.id == SIZE_ID)
+@pytest.fixture(scope="session")
+def catalog(moto_endpoint: MotoEndpoint) -> tuple[NodeSize, NodeImage]:
+    """Return a size and an image from moto's catalogue (listing images takes a second)."""
+    lister = CloudSimEC2NodeDriver(
+        ACCESS_KEY_ID,
+        SECRET_ACCESS_KEY,
+        host=moto_endpoint.host,
+        port=moto_endpoint.port,
+        secure=False,
+    )
+    size = next(size for size in lister.list_sizes() if size.id == SIZE_ID)
+    images: list[NodeImage] = lister.list_images(ex_owner="amazon")
+    return size, images[0]
 
 
 @pytest.fixture
-def image(driver: CloudSimEC2NodeDriver) -> NodeImage:
-    images: list[NodeImage] = driver.list_images(ex_owner="amazon")
-    return images[0]
+def size(catalog: tuple[NodeSize, NodeImage]) -> NodeSize:
+    return catalog[0]
+
+
+@pytest.fixture
+def image(catalog: tuple[NodeSize, NodeImage]) -> NodeImage:
+    return catalog[1]
