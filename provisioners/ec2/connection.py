@@ -48,7 +48,9 @@ class CloudSimEC2Response(EC2Response):  # type: ignore[misc]
     def parse_body(self) -> Any:
         """Parse the XML body, accepting moto's namespace spelling as well as AWS's."""
         # Harmless against AWS: its namespace already has the slash, so nothing matches.
-        self.body = self.body.replace(_MOTO_NAMESPACE_ATTRIBUTE, _AWS_NAMESPACE_ATTRIBUTE, 1)
+        self.body = str(self.body or "").replace(
+            _MOTO_NAMESPACE_ATTRIBUTE, _AWS_NAMESPACE_ATTRIBUTE, 1
+        )
         return super().parse_body()
 
     def parse_error(self) -> NoReturn:
@@ -67,7 +69,7 @@ class CloudSimEC2Response(EC2Response):  # type: ignore[misc]
             else (findall_ignore_namespace(root, "Errors/Error", NAMESPACE))
         )
         if not errors:
-            body = scrub(self.body[:_MESSAGE_LIMIT], secrets) or "(empty body)"
+            body = scrub(str(self.body or "")[:_MESSAGE_LIMIT], secrets) or "(empty body)"
             raise fallback_class(fallback_code, body, self.status) from None
         code = findtext_ignore_namespace(errors[0], "Code", NAMESPACE) or fallback_code
         message = scrub(findtext_ignore_namespace(errors[0], "Message", NAMESPACE) or "", secrets)

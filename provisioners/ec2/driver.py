@@ -28,13 +28,14 @@ from provisioners.ec2.networks import EC2ConstellationNetwork
 from provisioners.firewall import FirewallRule
 
 DEFAULT_DESTROY_TIMEOUT_SECONDS = 300.0
+DEFAULT_REQUEST_TIMEOUT_SECONDS = 60.0
 _GONE_INSTANCE_CODES = ("InvalidInstanceID.NotFound", "InvalidInstanceID.Malformed")
 
 
 class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
     """Amazon EC2 for CloudSim: constellation networks, firewalls and idempotent launches."""
 
-    type = "cloudsim-ec2"
+    type = "cloudsim-ec2"  # type: ignore[assignment]  # libcloud expects a Provider enum
     name = "CloudSim Amazon EC2"
     connectionCls = CloudSimEC2Connection
 
@@ -50,6 +51,7 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
         # moto only verifies SigV4; AWS accepts it in every region (SigV2 is deprecated).
         signature_version: str = "4",
         ex_availability_zone: str | None = None,
+        timeout: float = DEFAULT_REQUEST_TIMEOUT_SECONDS,
         **kwargs: Any,
     ) -> None:
         if not key or not secret:
@@ -66,6 +68,7 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
                 region=region,
                 token=token,
                 signature_version=signature_version,
+                timeout=timeout,  # libcloud's default is none: a silent endpoint would hang us
                 **kwargs,
             )
         except ValueError as error:  # libcloud's "Invalid region"
@@ -75,7 +78,9 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
 
     # -- networks ------------------------------------------------------------------------------
 
-    def ex_create_network(self, name: str, cidr: str | None = None) -> EC2ConstellationNetwork:
+    def ex_create_network(  # type: ignore[override]
+        self, name: str, cidr: str | None = None
+    ) -> EC2ConstellationNetwork:
         """Create (or complete) the named network: VPC and subnet on cidr, gateway, route.
 
         cidr defaults to networks.DEFAULT_CIDR (10.0.0.0/24); the VPC and its one subnet share
@@ -196,14 +201,15 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
         filters: dict[str, str | list[str]] = {f"tag:{key}": value for key, value in tags.items()}
         if not ex_include_terminated:
             filters["instance-state-name"] = NOT_TERMINATED_STATES
-        nodes: list[Node] = self.list_nodes(ex_filters=filters)
+        # libcloud's type comment says str; the code takes the dict its docstring describes.
+        nodes: list[Node] = self.list_nodes(ex_filters=filters)  # type: ignore[arg-type]
         return nodes
 
     def destroy_node(self, node: Node) -> bool:
         """Terminate the node; True also when it is already terminated or unknown to EC2."""
         # Checking first also spares moto a second termination, which it answers with an error.
         try:
-            current = self.list_nodes(ex_node_ids=[node.id])
+            current = self.list_nodes(ex_node_ids=[str(node.id)])  # type: ignore[arg-type]
         except EC2APIError as error:
             if error.code in _GONE_INSTANCE_CODES:
                 return True
@@ -251,7 +257,7 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
         identity = {NAME_TAG: tags[NAME_TAG], CONSTELLATION_TAG: tags[CONSTELLATION_TAG]}
         found = self.ex_list_nodes_by_tags(identity)
         if len(found) > 1:
-            ids = ", ".join(sorted(node.id for node in found))
+            ids = ", ".join(sorted(str(node.id) for node in found))
             raise NameInUseError(f"several live instances are named {identity}: {ids}")
         return found[0] if found else None
 

@@ -68,9 +68,10 @@ def instance_tags(
     for key, value in merged.items():
         if not isinstance(key, str) or not isinstance(value, str):
             raise InvalidRequestError(f"ex_tags must map str to str (got {key!r}: {value!r})")
-    for key, value in ((NAME_TAG, name), (ROLE_TAG, role), (NETWORK_TAG, network.name)):
-        if value is None:
-            continue
+    required = {NAME_TAG: name, NETWORK_TAG: network.name}
+    if role is not None:
+        required[ROLE_TAG] = role
+    for key, value in required.items():
         if merged.get(key, value) != value:
             raise InvalidRequestError(f"ex_tags[{key!r}] is {merged[key]!r}, not {value!r}")
         merged[key] = value

@@ -185,14 +185,14 @@ def destroy_network(api: EC2Api, name: str, timeout: float) -> None:
 
 def _delete_security_groups(api: EC2Api, name: str) -> None:
     groups = _tagged(api, "DescribeSecurityGroups", "securityGroupInfo", name)
-    # A group referenced by another group's rule cannot be deleted: drop every rule first.
+    # A group referenced by another group's rule cannot be deleted: drop those rules first.
     for group in groups:
         group_id = required_text(group, "groupId")
         for direction, action in (
             ("ipPermissions", "RevokeSecurityGroupIngress"),
             ("ipPermissionsEgress", "RevokeSecurityGroupEgress"),
         ):
-            permissions = read_permissions(group, direction)
+            permissions = {p for p in read_permissions(group, direction) if p.group_id}
             if permissions:
                 api.call_ignoring(
                     ["InvalidPermission.NotFound", "InvalidGroup.NotFound"],

@@ -5,6 +5,7 @@ import logging
 import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import pytest
 from cryptography.hazmat.primitives import serialization
@@ -48,9 +49,9 @@ def make_driver(moto_endpoint: MotoEndpoint) -> Callable[..., CloudSimEC2NodeDri
     """Build drivers pointed at moto; credentials default to the test pair."""
 
     def build(
-        key: str = ACCESS_KEY_ID, secret: str = SECRET_ACCESS_KEY, **kwargs: object
+        key: str = ACCESS_KEY_ID, secret: str = SECRET_ACCESS_KEY, **kwargs: Any
     ) -> CloudSimEC2NodeDriver:
-        options: dict[str, object] = {
+        options: dict[str, Any] = {
             "host": moto_endpoint.host,
             "port": moto_endpoint.port,
             "secure": False,
