@@ -87,19 +87,24 @@ def test_destroy_removes_every_namespace_mount_process_and_file(
 def test_failed_boot_raises_with_the_boot_log_and_cleans_up(
     make_driver: Callable[[], LocalNodeDriver], ssh_key: SshKey, state_dir: Path, host_prefix: str
 ) -> None:
-    impatient = LocalNodeDriver(state_dir=str(state_dir), prefix=host_prefix, boot_timeout=0.01)
-    network = impatient.ex_create_network("doomed")
+    # A machine without sshd: its init cannot start the one service a host must run.
+    broken = LocalNodeDriver(
+        state_dir=str(state_dir), prefix=host_prefix, hidden_paths=["/usr/sbin/sshd"]
+    )
+    network = broken.ex_create_network("doomed")
     try:
         with pytest.raises(HostBootError) as raised:
-            _create(impatient, "doomed", network, ssh_key, ex_init="minimal")
-        assert "creating node doomed failed" in str(raised.value)
-        assert "--- boot log of doomed" in str(raised.value)
+            _create(broken, "doomed", network, ssh_key, ex_init="minimal")
+        message = str(raised.value)
+        assert "creating node doomed failed" in message
+        assert "--- boot log of doomed" in message
+        assert "/usr/sbin/sshd" in message.split("--- boot log of doomed")[1]
         assert make_driver().list_nodes() == []
         assert f"{host_prefix}-h-doomed" not in list_namespaces(f"{host_prefix}-")
         assert not (state_dir / host_prefix / "nodes" / "doomed").exists()
         assert mounts_under(state_dir) == []
     finally:
-        impatient.ex_destroy_network(network)
+        broken.ex_destroy_network(network)
 
 
 def test_bad_requests_are_refused_before_anything_is_made(
@@ -234,9 +239,11 @@ import sys
 from libcloud.compute.base import NodeAuthSSHKey
 from provisioners.local.driver import LocalNodeDriver
 state_dir, prefix, public_key = sys.argv[1:4]
-driver = LocalNodeDriver(state_dir=state_dir, prefix=prefix)
+# Without sshd the host never gets ready: create_node is still waiting when it is killed.
+driver = LocalNodeDriver(state_dir=state_dir, prefix=prefix, hidden_paths=["/usr/sbin/sshd"])
 network = driver.ex_get_network("orphan")
-driver.create_node("orphan", None, None, auth=NodeAuthSSHKey(public_key), ex_network=network)
+auth = NodeAuthSSHKey(public_key)
+driver.create_node("orphan", None, None, auth=auth, ex_network=network, ex_init="systemd")
 """
 
 
