@@ -21,6 +21,7 @@ from provisioners.ec2.errors import (
 from provisioners.ec2.instances import (
     NOT_TERMINATED_STATES,
     InstanceRequest,
+    check_node_name,
     check_private_ip,
     instance_tags,
 )
@@ -92,7 +93,10 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
 
     def ex_list_networks(self) -> list[EC2ConstellationNetwork]:  # type: ignore[override]
         """Return every CloudSim network in this region."""
-        found = [networks.find_network(self._api, name) for name in self._network_names()]
+        found = [
+            networks.find_network(self._api, name)
+            for name in networks.list_network_names(self._api)
+        ]
         return [network for network in found if network is not None]
 
     def ex_list_vpcs(
@@ -149,8 +153,7 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
         ex_role selects the role's security group (from ex_apply_firewall; without it the VPC's
         default group applies); only ex_public machines get a public address.
         """
-        if not name or not isinstance(name, str):
-            raise InvalidRequestError(f"name must be a non-empty string, got {name!r}")
+        check_node_name(name)
         if size is None or image is None:
             raise InvalidRequestError("create_node needs a size and an image on EC2")
         if ex_network is None:
@@ -203,7 +206,12 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
             filters["instance-state-name"] = NOT_TERMINATED_STATES
         # libcloud's type comment says str; the code takes the dict its docstring describes.
         nodes: list[Node] = self.list_nodes(ex_filters=filters)  # type: ignore[arg-type]
-        return nodes
+        # EC2 filter values are wildcard patterns ("*", "?"): keep exact matches only.
+        return [
+            node
+            for node in nodes
+            if all(node.extra.get("tags", {}).get(key) == value for key, value in tags.items())
+        ]
 
     def destroy_node(self, node: Node) -> bool:
         """Terminate the node; True also when it is already terminated or unknown to EC2."""
@@ -249,9 +257,6 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
                 raise EC2APIError("NoAvailabilityZone", f"{self.region_name} offers no zone")
             self._availability_zone = sorted(zone.name for zone in zones)[0]
         return self._availability_zone
-
-    def _network_names(self) -> list[str]:
-        return networks.list_network_names(self._api)
 
     def _find_live_instance(self, tags: dict[str, str]) -> Node | None:
         identity = {NAME_TAG: tags[NAME_TAG], CONSTELLATION_TAG: tags[CONSTELLATION_TAG]}

@@ -1,6 +1,7 @@
 """Instance requests: tags, addresses and the RunInstances parameters of one machine."""
 
 import ipaddress
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -17,6 +18,7 @@ from provisioners.ec2.networks import EC2ConstellationNetwork
 NOT_TERMINATED_STATES = ["pending", "running", "stopping", "stopped"]
 # AWS keeps the first four addresses and the last one of every subnet.
 _RESERVED_AT_START = 4
+_NODE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,62}\Z")
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,16 @@ class InstanceRequest:
         if self.security_group_id is not None:
             params[f"{root}.SecurityGroupId.1"] = self.security_group_id
         return params
+
+
+def check_node_name(name: object) -> str:
+    """Return name if it is a valid machine name, else raise InvalidRequestError."""
+    if not isinstance(name, str) or not _NODE_NAME.match(name):
+        raise InvalidRequestError(
+            "name must be 1-63 letters, digits, '.', '_' or '-', starting with a letter or "
+            f"digit, got {name!r}"
+        )
+    return name
 
 
 def instance_tags(

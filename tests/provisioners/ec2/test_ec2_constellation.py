@@ -216,3 +216,16 @@ def test_unused_rule_roles_do_not_stop_a_machine_of_another_role(
     group_ids = constellation.driver.ex_apply_firewall(constellation.network, extra, ROLES)
     router = constellation.launch("router", "10.0.0.50", public=True)
     assert groups_of(constellation.driver, router) == {group_ids["router"]}
+
+
+def test_listing_by_tags_matches_values_exactly_not_as_patterns(
+    constellation: Constellation,
+) -> None:
+    sim = constellation.launch("sim", "10.0.0.51")
+    driver = constellation.driver
+
+    exact = driver.ex_list_nodes_by_tags({"cloudsim:constellation": constellation.name})
+    pattern = driver.ex_list_nodes_by_tags({"cloudsim:constellation": constellation.name[:3] + "*"})
+
+    assert [node.id for node in exact] == [sim.id]
+    assert pattern == []

@@ -141,7 +141,8 @@ def test_unreachable_endpoint_becomes_a_connection_error_without_credentials(
         ({"ex_tags": {"Name": "other"}}, "ex_tags\\['Name'\\]"),
         ({"ex_tags": {"cloudsim:role": 7}}, "str to str"),
         ({"size": None}, "size and an image"),
-        ({"name": ""}, "name"),
+        ({"name": ""}, "^name"),
+        ({"name": "sim*"}, "^name"),
     ],
 )
 def test_bad_create_node_arguments_are_refused_before_launch(
