@@ -75,6 +75,15 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_STALE_JOB_SECONDS": Setting(
         "300", "A job queued this long without starting is sent to the queue again"
     ),
+    "CLOUDSIM_LOCAL_PREFIX": Setting(
+        "cs", "Prefix of everything the local provider creates (namespaces, mounts, state)"
+    ),
+    "CLOUDSIM_LOCAL_SUBNET_POOL": Setting(
+        "10.211.0.0/16", "Private subnets of local constellations are carved from this pool"
+    ),
+    "CLOUDSIM_LOCAL_PUBLIC_CIDR": Setting(
+        "198.18.0.0/24", "The local provider's shared 'public' network"
+    ),
     "CLOUDSIM_ARGON2_TIME_COST": Setting("3", "Argon2id passes when hashing a password"),
     "CLOUDSIM_ARGON2_MEMORY_KIB": Setting("65536", "Argon2id memory per password hash, KiB"),
     "CLOUDSIM_LOG_LEVEL": Setting("INFO", "Log level of the web server and workers"),
@@ -102,6 +111,9 @@ class Config:
     job_visibility_timeout: int
     job_lease_seconds: int
     stale_job_seconds: int
+    local_prefix: str
+    local_subnet_pool: str
+    local_public_cidr: str
     argon2_time_cost: int
     argon2_memory_kib: int
     log_level: str
@@ -170,6 +182,9 @@ class Config:
             job_visibility_timeout=number("CLOUDSIM_JOB_VISIBILITY_TIMEOUT"),
             job_lease_seconds=number("CLOUDSIM_JOB_LEASE_SECONDS"),
             stale_job_seconds=number("CLOUDSIM_STALE_JOB_SECONDS"),
+            local_prefix=get("CLOUDSIM_LOCAL_PREFIX"),
+            local_subnet_pool=get("CLOUDSIM_LOCAL_SUBNET_POOL"),
+            local_public_cidr=get("CLOUDSIM_LOCAL_PUBLIC_CIDR"),
             argon2_time_cost=number("CLOUDSIM_ARGON2_TIME_COST"),
             argon2_memory_kib=number("CLOUDSIM_ARGON2_MEMORY_KIB"),
             log_level=get("CLOUDSIM_LOG_LEVEL").upper(),

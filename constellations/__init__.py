@@ -1,0 +1,1 @@
+"""Declarative definitions of constellation kinds: machines, network, firewall, deploy plans."""

@@ -55,11 +55,23 @@ class JobContext:
         return text
 
     def log(self, message: str) -> None:
-        """Append a timestamped line to the job log and commit it."""
-        stamp = utcnow().strftime("%H:%M:%S")
-        lines = self.masked(message).rstrip("\n").splitlines() or [""]
-        self.job.log = (self.job.log or "") + "".join(f"{stamp} {line}\n" for line in lines)
+        """Append timestamped lines to the job log, committing the session's other changes too."""
         db.session.commit()
+        self.line_sink()("", message)
+
+    def line_sink(self) -> Callable[[str, str], None]:
+        """Return a thread-safe `(source, line)` logger that appends straight to the job row."""
+        engine, job_id = db.engine, self.job.id
+
+        def append(source: str, message: str) -> None:
+            stamp = utcnow().strftime("%H:%M:%S")
+            prefix = f"[{source}] " if source else ""
+            lines = self.masked(message).rstrip("\n").splitlines() or [""]
+            text = "".join(f"{stamp} {prefix}{line}\n" for line in lines)
+            with engine.begin() as conn:
+                conn.execute(update(Job).where(Job.id == job_id).values(log=Job.log.concat(text)))
+
+        return append
 
     def stage(self, name: str, progress: int | None = None) -> None:
         """Enter a named stage, optionally setting progress (0-100)."""
@@ -143,11 +155,11 @@ def run_job(self: object, job_id: str) -> str:
         body(ctx)
     except Exception as exc:
         db.session.rollback()
+        ctx.line_sink()("", traceback.format_exc())
         job = db.session.get(Job, job_id)
         assert job is not None
         reason = str(exc) if isinstance(exc, CloudSimError) else f"{type(exc).__name__}: {exc}"
         job.error = ctx.masked(reason) or type(exc).__name__
-        job.log = (job.log or "") + ctx.masked(traceback.format_exc())
         job.state = JobState.FAILED
         job.finished_at = utcnow()
         db.session.commit()
@@ -155,8 +167,9 @@ def run_job(self: object, job_id: str) -> str:
     finally:
         heartbeat.stopped.set()
         heartbeat.join()
+    ctx.log("done")
     job.state = JobState.SUCCEEDED
     job.progress = 100
     job.finished_at = utcnow()
-    ctx.log("done")
+    db.session.commit()
     return str(job.state)

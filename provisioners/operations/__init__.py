@@ -14,6 +14,7 @@ from provisioners.operations.errors import DeployFailed, OperationError, Templat
 from provisioners.operations.files import directory, file, template
 from provisioners.operations.iptables import iptables_chain, iptables_rule
 from provisioners.operations.packages import deb_packages
+from provisioners.operations.routes import default_route
 from provisioners.operations.services import service
 from provisioners.operations.sysctl import sysctl
 from provisioners.operations.templates import MachineTemplates
@@ -33,6 +34,7 @@ __all__ = [
     "apply",
     "authorized_key",
     "deb_packages",
+    "default_route",
     "directory",
     "file",
     "iptables_chain",

@@ -1,0 +1,1 @@
+"""Constellations: launching, verifying and terminating sets of machines, and their pages."""

@@ -1,0 +1,302 @@
+"""Launch and terminate constellations: the bodies of their jobs, every stage idempotent.
+
+A launch goes through keys, network, machines, firewall, install, verify and ready. Each
+stage reads what already exists (in the database and at the provider) and only adds what is
+missing, so a job resumed after its worker died finishes the work without duplicating or
+leaking machines.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, TypeVar
+
+from flask import current_app
+from libcloud.compute.base import Node, NodeAuthSSHKey
+from libcloud.compute.types import NodeState
+
+from cloudsim.config import Config
+from cloudsim.errors import CloudSimError, NotFound
+from cloudsim.extensions import db
+from cloudsim.fleet.connect import MachineHostKeys, targets
+from cloudsim.fleet.keys import KeyPair, constellation_keypair
+from cloudsim.fleet.providers import NetworkDriver, make_driver
+from cloudsim.fleet.verify import verify_constellation
+from cloudsim.jobs.runner import JobContext, job_kind
+from cloudsim.models import Constellation, ConstellationState, MachineState, Secret
+from constellations.definition import ConstellationKind, load_kind
+from constellations.plans import PLANS, Action, PlanContext, PlanItem, firewall
+from constellations.plans.software import build_wheelhouse
+from provisioners.operations import apply
+from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
+from provisioners.ssh import Machine as Target
+
+T = TypeVar("T")
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
+SIMULATOR_SOURCE = PROJECT_ROOT / "simulator"
+NEEDS_WHEELHOUSE = {"simulator", "field_computer"}
+
+
+class ProvisioningError(CloudSimError):
+    """A stage of a launch or terminate failed; the message says which and why."""
+
+
+def _constellation(ctx: JobContext) -> Constellation:
+    constellation = db.session.get(Constellation, ctx.job.target_id)
+    if constellation is None:
+        raise NotFound(f"constellation {ctx.job.target_id} no longer exists")
+    return constellation
+
+
+def nodes_of(driver: NetworkDriver, constellation: Constellation) -> list[Node]:
+    """Return the provider's nodes that belong to the constellation."""
+    return [
+        node
+        for node in driver.list_nodes()
+        if node.extra.get("tags", {}).get("cloudsim:constellation") == constellation.name
+    ]
+
+
+@job_kind("constellation.launch")
+def launch_constellation(ctx: JobContext) -> None:
+    """Bring a constellation to `ready`, or to `error` with the reason."""
+    constellation = _constellation(ctx)
+    if constellation.state in (ConstellationState.TERMINATING, ConstellationState.TERMINATED):
+        raise ProvisioningError(f"{constellation.name} is {constellation.state.value}")
+    config: Config = current_app.config["CLOUDSIM"]
+    kind = load_kind(constellation.kind, set(PLANS))
+    constellation.state, constellation.error = ConstellationState.LAUNCHING, None
+    try:
+        _launch(ctx, constellation, kind, config)
+    except Exception as exc:
+        db.session.rollback()
+        constellation = _constellation(ctx)
+        constellation.state = ConstellationState.ERROR
+        constellation.error = ctx.masked(f"{ctx.job.stage}: {exc}")
+        db.session.commit()
+        raise
+    constellation.state = ConstellationState.READY
+    for machine in constellation.machines:
+        machine.state = MachineState.READY
+    ctx.stage("ready", 100)
+
+
+def _launch(
+    ctx: JobContext, constellation: Constellation, kind: ConstellationKind, config: Config
+) -> None:
+    ctx.stage("keys", 2)
+    keys = constellation_keypair(constellation)
+    driver = make_driver(constellation.provider, config)
+    ctx.stage("network", 5)
+    subnet = _ensure_network(ctx, driver, constellation, kind)
+    ctx.stage("machines", 10)
+    nodes = _ensure_machines(ctx, driver, constellation, kind, keys, subnet)
+    executor = SSHExecutor(
+        MachineHostKeys(constellation),
+        log_sink=ctx.line_sink(),
+        secrets=[keys.private],
+        connect_policy=ConnectPolicy(deadline=120),
+    )
+    with executor:
+        reach = targets(constellation, nodes, keys)
+        contexts = {
+            m.name: _plan_context(constellation, kind, m.name, subnet, config)
+            for m in kind.machines
+        }
+        ctx.stage("firewall", 40)
+        if hasattr(driver, "ex_apply_firewall"):
+            driver.ex_apply_firewall(
+                _network(driver, constellation), list(kind.firewall), kind.roles
+            )
+        _deploy(ctx, executor, reach, {n: firewall(c) for n, c in contexts.items()})
+        ctx.stage("install", 50)
+        if any(set(m.plan) & NEEDS_WHEELHOUSE for m in kind.machines):
+            ctx.log("building the simulator's wheelhouse (cached after the first time)")
+            wheelhouse = build_wheelhouse(SIMULATOR_SOURCE, config.instance_dir / "wheelhouse")
+            contexts = {n: _with_wheelhouse(c, wheelhouse) for n, c in contexts.items()}
+        plans = {
+            n: [item for plan in c.machine.plan for item in PLANS[plan](c)]
+            for n, c in contexts.items()
+        }
+        _deploy(ctx, executor, reach, plans)
+        ctx.stage("verify", 80)
+        public_probe = getattr(driver, "ex_public_proxy_command", None)
+        verify_constellation(ctx, executor, constellation, kind, reach, public_probe)
+
+
+def _network(driver: NetworkDriver, constellation: Constellation) -> Any:
+    return driver.ex_get_network(constellation.name)
+
+
+def _ensure_network(
+    ctx: JobContext, driver: NetworkDriver, constellation: Constellation, kind: ConstellationKind
+) -> str:
+    """Create the private network once; return its subnet."""
+    existing = {n.name: n for n in driver.ex_list_networks()}
+    network = existing.get(constellation.name)
+    if network is None:
+        network = driver.ex_create_network(constellation.name)
+        ctx.log(f"created network {network.name} ({network.cidr})")
+    else:
+        ctx.log(f"network {network.name} ({network.cidr}) exists")
+    constellation.resources = {
+        **constellation.resources,
+        "network": network.name,
+        "subnet": network.cidr,
+    }
+    for machine in constellation.machines:
+        machine.private_ip = kind.machine(machine.name).address(network.cidr)
+    db.session.commit()
+    return str(network.cidr)
+
+
+def _ensure_machines(
+    ctx: JobContext,
+    driver: NetworkDriver,
+    constellation: Constellation,
+    kind: ConstellationKind,
+    keys: KeyPair,
+    subnet: str,
+) -> list[Node]:
+    """Create every machine the provider does not have running; replace broken ones."""
+    network = _network(driver, constellation)
+    have = {
+        node.extra["tags"].get("cloudsim:machine"): node for node in nodes_of(driver, constellation)
+    }
+    wanted = [m for m in kind.machines]
+    for definition in wanted:
+        node = have.get(definition.name)
+        if node is not None and node.state != NodeState.RUNNING:
+            ctx.log(f"{definition.name}: found {node.state}; replacing it")
+            driver.destroy_node(node)
+            del have[definition.name]
+    missing = [m for m in wanted if m.name not in have]
+    rows = {m.name: m for m in constellation.machines}
+    for definition in missing:
+        rows[definition.name].state = MachineState.CREATING
+    db.session.commit()
+    size = driver.list_sizes()[0]
+    image = driver.list_images()[0]
+    name = constellation.name  # plain values only: the threads have no database session
+
+    def create(definition: Any) -> Node:
+        return driver.create_node(
+            name=f"{name}-{definition.name}",
+            size=size,
+            image=image,
+            auth=NodeAuthSSHKey(keys.public),
+            ex_network=network,
+            ex_private_ip=definition.address(subnet),
+            ex_public=definition.public,
+            ex_tags={
+                "cloudsim:constellation": name,
+                "cloudsim:machine": definition.name,
+                "cloudsim:role": definition.role,
+            },
+        )
+
+    created = _in_parallel(missing, create, lambda d: d.name)
+    log = ctx.line_sink()
+    for name, node in created.items():
+        log(name, f"created {node.id} ({', '.join(node.private_ips + node.public_ips)})")
+    nodes = {**have, **created}
+    for name, node in nodes.items():
+        row = rows[name]
+        row.provider_node_id = str(node.id)
+        row.public_ip = node.public_ips[0] if node.public_ips else None
+        row.state = MachineState.RUNNING
+    db.session.commit()
+    return list(nodes.values())
+
+
+def _in_parallel(
+    items: Sequence[Any], fn: Callable[[Any], T], key: Callable[[Any], str]
+) -> dict[str, T]:
+    """Call fn on every item in threads; raise one error naming every failure."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    if not items:
+        return {}
+    with ThreadPoolExecutor(max_workers=len(items)) as pool:
+        futures = {key(item): pool.submit(fn, item) for item in items}
+    failures = {name: f.exception() for name, f in futures.items() if f.exception()}
+    if failures:
+        raise ProvisioningError(
+            "; ".join(f"{name}: {error}" for name, error in sorted(failures.items()))
+        )
+    return {name: f.result() for name, f in futures.items()}
+
+
+def _plan_context(
+    constellation: Constellation, kind: ConstellationKind, name: str, subnet: str, config: Config
+) -> PlanContext:
+    return PlanContext(
+        constellation=constellation.name,
+        team=constellation.team.name if constellation.team else "",
+        kind=kind,
+        machine=kind.machine(name),
+        subnet=subnet,
+        addresses={m.name: m.address(subnet) for m in kind.machines},
+    )
+
+
+def _with_wheelhouse(context: PlanContext, wheelhouse: Path) -> PlanContext:
+    from dataclasses import replace
+
+    return replace(context, wheelhouse=wheelhouse)
+
+
+def _deploy(
+    ctx: JobContext,
+    executor: SSHExecutor,
+    reach: dict[str, Target],
+    plans: dict[str, list[PlanItem]],
+) -> None:
+    """Apply each machine's plan, all machines at once; fail naming every machine that failed."""
+    db.session.commit()  # worker threads write the log on their own connections
+
+    def deploy(target: Target) -> int:
+        changed = 0
+        for item in plans[target.name.rsplit("/", 1)[-1]]:
+            if isinstance(item, Action):
+                executor.log(target.name, f"[{item.name}]")
+                changed += item.run(executor, target)
+            else:
+                changed += apply(executor, target, item).changed
+        return changed
+
+    try:
+        outcome = executor.run_parallel(list(reach.values()), deploy)
+    except SSHError as exc:
+        raise ProvisioningError(str(exc)) from exc
+    ctx.log(", ".join(f"{name.rsplit('/', 1)[-1]}: {n} changed" for name, n in outcome.items()))
+
+
+@job_kind("constellation.terminate")
+def terminate_constellation(ctx: JobContext) -> None:
+    """Release every resource of a constellation; safe to run again and again."""
+    constellation = _constellation(ctx)
+    config: Config = current_app.config["CLOUDSIM"]
+    constellation.state = ConstellationState.TERMINATING
+    ctx.stage("machines", 10)
+    driver = make_driver(constellation.provider, config)
+    nodes = nodes_of(driver, constellation)
+    for machine in constellation.machines:
+        machine.state = MachineState.TERMINATING
+    db.session.commit()
+    _in_parallel(nodes, lambda node: driver.destroy_node(node), lambda node: node.name)
+    ctx.log(f"destroyed {len(nodes)} machine(s)")
+    ctx.stage("network", 70)
+    network = {n.name: n for n in driver.ex_list_networks()}.get(constellation.name)
+    if network is not None:
+        driver.ex_destroy_network(network)
+        ctx.log(f"destroyed network {network.name}")
+    ctx.stage("keys", 90)
+    db.session.query(Secret).filter_by(
+        owner_type="constellation", owner_id=constellation.id
+    ).delete()
+    for machine in constellation.machines:
+        machine.state = MachineState.TERMINATED
+    constellation.state = ConstellationState.TERMINATED
+    ctx.stage("terminated", 100)

@@ -1,0 +1,132 @@
+"""The verify stage: every machine answers, the reachability matrix holds, the simulator runs."""
+
+from __future__ import annotations
+
+import json
+import shlex
+import socket
+import subprocess
+from collections.abc import Callable
+from typing import Any
+
+from cloudsim.errors import CloudSimError
+from cloudsim.extensions import db
+from cloudsim.jobs.runner import JobContext
+from cloudsim.models import Constellation, utcnow
+from constellations.definition import PUBLIC, ConstellationKind, Reachability
+from provisioners.ssh import Machine as Target
+from provisioners.ssh import SSHExecutor
+
+PROBE_SECONDS = 3
+SELFTEST = "/opt/drcsim/bin/drcsim selftest --seconds 2 --no-sensors --min-rtf 0 --json"
+
+PublicProbe = Callable[[str, int], list[str]]
+
+
+class VerificationFailed(CloudSimError):
+    """A check of the verify stage failed; the message lists every failed check."""
+
+
+def verify_constellation(
+    ctx: JobContext,
+    executor: SSHExecutor,
+    constellation: Constellation,
+    kind: ConstellationKind,
+    reach: dict[str, Target],
+    public_probe: PublicProbe | None,
+) -> None:
+    """Run every check, store the results per machine, raise listing the failures."""
+    results: dict[str, dict[str, Any]] = {m.name: {"checks": []} for m in constellation.machines}
+    failures: list[str] = []
+    answers = executor.run_parallel(
+        list(reach.values()),
+        lambda t: executor.run(t, "hostname", timeout=30).stdout.strip(),
+        raise_on_error=False,
+    )
+    for target_name, answer in answers.items():
+        name = target_name.rsplit("/", 1)[-1]
+        ok = not isinstance(answer, Exception)
+        results[name]["ssh"] = {"ok": ok, "detail": str(answer)}
+        if not ok:
+            failures.append(f"{name} does not answer over SSH: {answer}")
+    addresses = {m.name: (m.public_ip or m.private_ip or "") for m in constellation.machines}
+    private = {m.name: m.private_ip or "" for m in constellation.machines}
+    for check in kind.reachability:
+        if check.source == PUBLIC:
+            connected = _probe_public(public_probe, addresses[check.target], check.port)
+        else:
+            connected = _probe_from(
+                executor, reach[check.source], private[check.target], check.port
+            )
+        verdict = connected == check.allowed
+        owner = check.target if check.source == PUBLIC else check.source
+        results[owner]["checks"].append(
+            {
+                "from": check.source,
+                "to": check.target,
+                "port": check.port,
+                "expected": "open" if check.allowed else "closed",
+                "seen": "open" if connected else "closed",
+                "ok": verdict,
+            }
+        )
+        if not verdict:
+            failures.append(_describe(check, connected))
+    for machine in kind.machines:
+        if "simulator" in machine.plan:
+            results[machine.name]["simulator"] = _selftest(executor, reach[machine.name])
+            if not results[machine.name]["simulator"]["ok"]:
+                failures.append(
+                    f"{machine.name}: simulator self-test failed: "
+                    f"{results[machine.name]['simulator'].get('detail', '')}"
+                )
+    stamp = utcnow().isoformat()
+    for row in constellation.machines:
+        row.verification = {**results[row.name], "at": stamp}
+    db.session.commit()
+    passed = sum(c["ok"] for r in results.values() for c in r["checks"])
+    ctx.log(f"reachability: {passed} of {len(kind.reachability)} checks as expected")
+    if failures:
+        raise VerificationFailed("verification failed: " + "; ".join(failures))
+
+
+def _describe(check: Reachability, connected: bool) -> str:
+    seen = "connected" if connected else "could not connect"
+    return f"{check.source} -> {check.target}:{check.port} {seen}, expected the opposite"
+
+
+def _probe_from(executor: SSHExecutor, source: Target, address: str, port: int) -> bool:
+    """Return True when a TCP connection from a machine to address:port succeeds."""
+    probe = f"exec 3<>/dev/tcp/{address}/{port}"
+    command = f"timeout {PROBE_SECONDS} bash -c {shlex.quote(probe)}"
+    return executor.run(source, command, check=False, timeout=PROBE_SECONDS + 10).ok
+
+
+def _probe_public(public_probe: PublicProbe | None, address: str, port: int) -> bool:
+    """Return True when "the internet" (the provider's public side, or here) reaches address."""
+    if public_probe is None:
+        try:
+            with socket.create_connection((address, port), timeout=PROBE_SECONDS):
+                return True
+        except OSError:
+            return False
+    try:
+        result = subprocess.run(
+            public_probe(address, port),
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            timeout=PROBE_SECONDS,
+            check=False,
+        )
+    except subprocess.TimeoutExpired:
+        return False
+    return result.returncode == 0
+
+
+def _selftest(executor: SSHExecutor, target: Target) -> dict[str, Any]:
+    result = executor.run(target, SELFTEST, check=False, timeout=300)
+    lines = [line for line in result.stdout.splitlines() if line.startswith("{")]
+    if not result.ok or not lines:
+        return {"ok": False, "detail": (result.stderr or result.stdout).strip()[-500:]}
+    report = json.loads(lines[-1])
+    return {"ok": bool(report.get("ok")), "rtf": report.get("rtf"), "world": report.get("world")}

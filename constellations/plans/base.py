@@ -1,0 +1,49 @@
+"""What a plan is given (PlanContext) and what it returns (operations and actions)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from constellations.definition import ConstellationKind, MachineDefinition
+from provisioners.operations import MachineTemplates, Operation
+from provisioners.ssh import Machine as Target
+from provisioners.ssh import SSHExecutor
+
+
+@dataclass(frozen=True)
+class Action:
+    """A step too big for an operation's in-memory upload (e.g. a wheelhouse); idempotent.
+
+    `run` returns True when it changed the machine.
+    """
+
+    name: str
+    run: Callable[[SSHExecutor, Target], bool]
+
+
+PlanItem = Operation | Action
+
+
+@dataclass(frozen=True)
+class PlanContext:
+    """Everything a plan may use about the machine it deploys and its constellation."""
+
+    constellation: str
+    team: str
+    kind: ConstellationKind
+    machine: MachineDefinition
+    subnet: str
+    addresses: dict[str, str]
+    wheelhouse: Path | None = None
+    templates: MachineTemplates = field(default_factory=MachineTemplates)
+
+    @property
+    def hostname(self) -> str:
+        """Return the machine's host name (the provider's node name)."""
+        return f"{self.constellation}-{self.machine.name}"
+
+    def addresses_of_role(self, role: str) -> list[str]:
+        """Return the private addresses of every machine with this role."""
+        return [self.addresses[m.name] for m in self.kind.machines if m.role == role]

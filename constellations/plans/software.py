@@ -1,0 +1,104 @@
+"""Software for machines without internet: a wheelhouse built here, uploaded, installed offline."""
+
+from __future__ import annotations
+
+import hashlib
+import shlex
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from constellations.plans.base import Action
+from provisioners.ssh import Machine as Target
+from provisioners.ssh import SSHExecutor
+
+SUMS = "SHA256SUMS"
+REMOTE_ROOT = "/opt/cloudsim/wheelhouse"
+_SKIP = {"__pycache__", ".egg-info", "build", "dist", ".pytest_cache"}
+
+
+class WheelhouseError(Exception):
+    """The wheelhouse could not be built."""
+
+
+def _source_digest(source: Path) -> str:
+    digest = hashlib.sha256()
+    for path in sorted(source.rglob("*")):
+        if path.is_file() and not any(
+            part in _SKIP or part.endswith(".egg-info") for part in path.relative_to(source).parts
+        ):
+            digest.update(str(path.relative_to(source)).encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def build_wheelhouse(source: Path, cache_dir: Path) -> Path:
+    """Return a folder of wheels for the distribution in `source` and all its dependencies.
+
+    Built once per version of the source and cached; a half-built folder is never used.
+    """
+    target = cache_dir / f"{source.name}-{_source_digest(source)}"
+    if (target / SUMS).is_file():
+        return target
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=cache_dir, prefix=".building-") as scratch:
+        result = subprocess.run(
+            [sys.executable, "-m", "pip", "wheel", "--quiet", "--wheel-dir", scratch, str(source)],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        if result.returncode != 0:
+            raise WheelhouseError(f"pip wheel {source} failed: {result.stderr.strip()[-2000:]}")
+        sums = "".join(
+            f"{_file_sha256(wheel)}  {wheel.name}\n"
+            for wheel in sorted(Path(scratch).glob("*.whl"))
+        )
+        (Path(scratch) / SUMS).write_text(sums)
+        shutil.rmtree(target, ignore_errors=True)
+        Path(scratch).rename(target)
+    return target
+
+
+def _file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for chunk in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def _sums(text: str) -> dict[str, str]:
+    pairs = (line.split() for line in text.splitlines() if line.strip())
+    return {name: digest for digest, name in pairs}
+
+
+def install_wheelhouse(wheelhouse: Path, venv: str, requirement: str) -> Action:
+    """Upload the wheels the machine lacks and install `requirement` into `venv`, offline."""
+    remote = f"{REMOTE_ROOT}/{wheelhouse.name}"
+    marker = f"{venv}/.cloudsim-installed-{wheelhouse.name}"
+    wanted = _sums((wheelhouse / SUMS).read_text())
+
+    def run(executor: SSHExecutor, target: Target) -> bool:
+        if executor.run(target, f"test -e {shlex.quote(marker)}", check=False).ok:
+            return False
+        executor.run(target, f"mkdir -p {shlex.quote(remote)}")
+        listing = executor.run(
+            target, f"cd {shlex.quote(remote)} && sha256sum -- *.whl 2>/dev/null || true"
+        )
+        present = _sums(listing.stdout)
+        for name, digest in sorted(wanted.items()):
+            if present.get(name) != digest:
+                executor.put_file(target, wheelhouse / name, f"{remote}/{name}")
+        executor.run(
+            target,
+            f"python3 -m venv {shlex.quote(venv)} && "
+            f"{shlex.quote(venv)}/bin/pip install --quiet --no-index --find-links "
+            f"{shlex.quote(remote)} {shlex.quote(requirement)} && touch {shlex.quote(marker)}",
+            timeout=900,
+        )
+        return True
+
+    return Action(f"install {requirement} from {wheelhouse.name} into {venv}", run)
