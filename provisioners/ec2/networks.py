@@ -147,15 +147,15 @@ def destroy_network(api: EC2Api, name: str, timeout: float) -> None:
     Refuses while live instances are in it; waits up to timeout for dying ones to go.
     """
     check_network_name(name)
-    vpc = _find_one(api, "DescribeVpcs", "vpcSet", name)
-    if vpc is not None:
-        vpc_id = required_text(vpc, "vpcId")
+    vpc_ids = [required_text(vpc, "vpcId") for vpc in _tagged(api, "DescribeVpcs", "vpcSet", name)]
+    for vpc_id in vpc_ids:
         live = _instance_ids(api, vpc_id, LIVE_INSTANCE_STATES)
         if live:
             instances = ", ".join(sorted(live))
             raise NetworkInUseError(
                 f"network {name!r} still has instances {instances}: destroy them first"
             )
+    for vpc_id in vpc_ids:
         _await_no_dying_instances(api, name, vpc_id, timeout)
     _delete_security_groups(api, name)
     for gateway in _tagged(api, "DescribeInternetGateways", "internetGatewaySet", name):
@@ -177,10 +177,8 @@ def destroy_network(api: EC2Api, name: str, timeout: float) -> None:
             "DeleteSubnet",
             {"SubnetId": required_text(subnet, "subnetId")},
         )
-    for tagged_vpc in _tagged(api, "DescribeVpcs", "vpcSet", name):
-        api.call_ignoring(
-            ["InvalidVpcID.NotFound"], "DeleteVpc", {"VpcId": required_text(tagged_vpc, "vpcId")}
-        )
+    for vpc_id in vpc_ids:
+        api.call_ignoring(["InvalidVpcID.NotFound"], "DeleteVpc", {"VpcId": vpc_id})
 
 
 def _delete_security_groups(api: EC2Api, name: str) -> None:
