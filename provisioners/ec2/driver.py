@@ -9,7 +9,7 @@ from libcloud.compute.drivers.ec2 import NAMESPACE, EC2NodeDriver
 from libcloud.compute.types import NodeState
 
 from provisioners.ec2 import keys, networks, security_groups
-from provisioners.ec2.api import CONSTELLATION_TAG, NAME_TAG, EC2Api, tag_params
+from provisioners.ec2.api import CONSTELLATION_TAG, NAME_TAG, ROLE_TAG, EC2Api, tag_params
 from provisioners.ec2.connection import CloudSimEC2Connection
 from provisioners.ec2.errors import (
     EC2APIError,
@@ -150,8 +150,9 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
     ) -> Node:
         """Launch a machine into ex_network, or return the live one of that name already there.
 
-        ex_role selects the role's security group (from ex_apply_firewall; without it the VPC's
-        default group applies); only ex_public machines get a public address.
+        The role (ex_role, else ex_tags["cloudsim:role"]) picks the machine's security group,
+        made empty if ex_apply_firewall has not run yet; without a role the VPC's default group
+        applies. Only ex_public machines get a public address.
         """
         check_node_name(name)
         if size is None or image is None:
@@ -165,19 +166,16 @@ class CloudSimEC2NodeDriver(EC2NodeDriver):  # type: ignore[misc]
         if location_zone != zone:
             raise InvalidRequestError(f"location {location_zone} is not the subnet's zone {zone}")
         tags = instance_tags(name, ex_network, ex_tags, ex_role)
+        role = tags.get(ROLE_TAG)
         private_ip = check_private_ip(ex_private_ip, ex_network)
         public_key = keys.check_public_key(auth.pubkey)
         existing = self._find_live_instance(tags)
         if existing is not None:
             return self._check_existing(existing, ex_network, private_ip)
         group_id = None
-        if ex_role is not None:
-            group_id = security_groups.find_group_id(self._api, ex_network, ex_role)
-            if group_id is None:
-                raise InvalidRequestError(
-                    f"network {ex_network.name!r} has no security group for role {ex_role!r}: "
-                    "call ex_apply_firewall first"
-                )
+        if role is not None:
+            # The engine may launch before it applies the firewall: start closed, not open.
+            group_id = security_groups.ensure_group_id(self._api, ex_network, role)
         request = InstanceRequest(
             name=name,
             image_id=image.id,

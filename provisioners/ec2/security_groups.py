@@ -48,10 +48,13 @@ def apply_firewall(
     return group_ids
 
 
-def find_group_id(api: EC2Api, network: EC2ConstellationNetwork, role: str) -> str | None:
-    """Return the id of role's security group in network, or None when there is none."""
-    group = _find_group(api, network, role)
-    return required_text(group, "groupId") if group is not None else None
+def ensure_group_id(api: EC2Api, network: EC2ConstellationNetwork, role: str) -> str:
+    """Return the id of role's security group, creating it empty (nothing allowed in) if absent."""
+    try:
+        check_role_name("ex_role", role)
+    except ValueError as error:
+        raise InvalidRequestError(str(error)) from None
+    return required_text(_ensure_group(api, network, role), "groupId")
 
 
 def _check_request(rules: Sequence[FirewallRule], roles: Sequence[str]) -> None:

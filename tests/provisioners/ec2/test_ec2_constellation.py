@@ -165,18 +165,37 @@ def test_unusable_private_address_is_refused_before_launch(
     assert constellation.live_nodes() == []
 
 
-def test_role_without_a_security_group_is_refused(constellation: Constellation) -> None:
-    driver = constellation.driver
-    with pytest.raises(InvalidRequestError, match="ex_apply_firewall"):
-        driver.create_node(
-            "db",
-            constellation.size,
-            constellation.image,
-            auth=NodeAuthSSHKey(constellation.public_key),
-            ex_network=constellation.network,
-            ex_role="db",
-        )
-    assert constellation.live_nodes() == []
+def test_machine_launched_before_the_firewall_starts_closed_and_gets_the_rules_later(
+    driver: CloudSimEC2NodeDriver,
+    network_name: str,
+    size: NodeSize,
+    image: NodeImage,
+    public_key: str,
+) -> None:
+    network = driver.ex_create_network(network_name, LAN)
+    # The engine's way: the role only in ex_tags, the firewall applied after the launch.
+    node = driver.create_node(
+        name=f"{network_name}-sim",
+        size=size,
+        image=image,
+        auth=NodeAuthSSHKey(public_key),
+        ex_network=network,
+        ex_private_ip="10.0.0.51",
+        ex_tags={"cloudsim:constellation": network_name, "cloudsim:role": "sim"},
+    )
+    try:
+        [group] = driver.ex_get_security_groups(filters={"group-name": f"{network_name}-sim"})
+        assert group.ingress_rules == []
+        assert groups_of(driver, node) == {group.id}
+
+        group_ids = driver.ex_apply_firewall(network, VRC_RULES, ROLES)
+
+        assert group_ids["sim"] == group.id
+        [applied] = driver.ex_get_security_groups(group_ids=[group.id])
+        assert [rule["cidr_ips"] for rule in applied.ingress_rules] == [[LAN]]
+    finally:
+        driver.destroy_node(node)
+        driver.ex_destroy_network(network)
 
 
 def test_terminating_everything_leaves_nothing_behind(

@@ -143,6 +143,8 @@ def test_unreachable_endpoint_becomes_a_connection_error_without_credentials(
         ({"size": None}, "size and an image"),
         ({"name": ""}, "^name"),
         ({"name": "sim*"}, "^name"),
+        ({"ex_role": "Bad Role"}, "^ex_role must be a role name"),
+        ({"ex_role": "sim", "ex_tags": {"cloudsim:role": "fc1"}}, "cloudsim:role"),
     ],
 )
 def test_bad_create_node_arguments_are_refused_before_launch(
