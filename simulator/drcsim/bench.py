@@ -68,6 +68,7 @@ def start_server(
     config: str,
     extra: list[str],
     log_dir: Path | None = None,
+    stderr: Path | None = None,
 ) -> tuple[subprocess.Popen[bytes], int]:
     """Start `drcsim serve` on loopback ports; return the process and its command port."""
     port, publish_port = free_port(), free_port()
@@ -90,14 +91,18 @@ def start_server(
     ]
     if log_dir is not None:
         args += ["--log-dir", str(log_dir)]
-    process = subprocess.Popen(args, stdout=subprocess.DEVNULL, env={**os.environ})
-    return process, port
+    if stderr is None:
+        return subprocess.Popen(args, stdout=subprocess.DEVNULL), port
+    with open(stderr, "wb") as errors:
+        return subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=errors), port
 
 
-def wait_ready(port: int, process: subprocess.Popen[bytes], timeout_s: float = 30.0) -> None:
+def wait_ready(
+    port: int, process: subprocess.Popen[bytes], timeout_s: float = 30.0, source: str | None = None
+) -> None:
     """Wait until the server at `port` answers hello (or its process dies)."""
     deadline = time.monotonic() + timeout_s
-    with SimClient("127.0.0.1", port, timeout_s=0.5) as client:
+    with SimClient("127.0.0.1", port, timeout_s=0.5, source=source) as client:
         while time.monotonic() < deadline:
             if process.poll() is not None:
                 raise DrcsimError(f"server exited with {process.returncode}")

@@ -13,7 +13,6 @@ import zmq
 from drcsim.errors import ClientError
 
 DEFAULT_COMMAND_PORT = 7700
-DEFAULT_PUBLISH_PORT = 7701
 
 
 class SimClient:
@@ -29,7 +28,7 @@ class SimClient:
     ) -> None:
         self.host = host
         self.command_port = command_port
-        self.publish_port = publish_port if publish_port is not None else command_port + 1
+        self.publish_port = publish_port  # None: ask the server (hello) on first subscribe
         self.timeout_s = timeout_s
         self.source = source
         self.context = zmq.Context()
@@ -125,6 +124,8 @@ class SimClient:
     def subscribe(self, *topics: str) -> None:
         """Start receiving `topics` (sensors are only computed while someone subscribes)."""
         if self.topics is None:
+            if self.publish_port is None:
+                self.publish_port = int(self.hello()["publish_port"])
             self.topics = self.context.socket(zmq.SUB)
             self.topics.linger = 0
             self.topics.connect(self._endpoint(self.publish_port))

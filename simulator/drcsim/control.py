@@ -88,10 +88,9 @@ class JointController:
         )
         torque = np.where(self.mode == POSITION, pid, self.commanded_torque)
         torque = np.clip(torque, -self.max_effort, self.max_effort)
-        # Velocity limit: no torque may push a joint further past its speed limit.
+        # Velocity limit: past it, the actuator brakes with all it has, whatever was asked.
         over = np.abs(self.velocity) > self.max_velocity
-        pushing = np.sign(torque) == np.sign(self.velocity)
-        torque = np.where(over & pushing, 0.0, torque)
+        torque = np.where(over, -np.sign(self.velocity) * self.max_effort, torque)
         self.applied = torque
         self.client.setJointMotorControlArray(
             self.robot, self.indices, pybullet.TORQUE_CONTROL, forces=torque.tolist()

@@ -14,6 +14,7 @@ from typing import Any
 
 from drcsim.client import SimClient
 from drcsim.errors import ClientError
+from drcsim.local import LocalClient
 
 Log = Callable[[str], None]
 
@@ -26,7 +27,9 @@ def _yaw(orientation: list[float]) -> float:
 class ExampleController:
     """Runs one task to completion (or as far as it gets) over a SimClient."""
 
-    def __init__(self, client: SimClient, log: Log = lambda _: None, timeout_s: float = 600.0):
+    def __init__(
+        self, client: SimClient | LocalClient, log: Log = lambda _: None, timeout_s: float = 600.0
+    ):
         self.client = client
         self.log = log
         self.info = client.hello()

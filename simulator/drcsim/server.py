@@ -47,6 +47,34 @@ def parse_networks(entries: list[str]) -> list[ipaddress.IPv4Network | ipaddress
         raise ProtocolError(f"bad allow-list entry: {exc}") from exc
 
 
+def describe_run(sim: Simulation, lockstep: bool) -> dict[str, Any]:
+    """Return the hello reply: world, joints and limits, behaviours, topics, course briefing."""
+    spec = sim.spec
+    joints = [
+        {
+            "name": j.name,
+            "lower": j.lower,
+            "upper": j.upper,
+            "velocity": j.velocity,
+            "effort": j.effort,
+        }
+        for j in ALL_JOINTS
+    ]
+    return {
+        "world": spec.name,
+        "config": spec.config,
+        "title": spec.title,
+        "lockstep": lockstep,
+        "timestep": TIMESTEP,
+        "time_limit_s": spec.time_limit_s,
+        "joints": joints,
+        "behaviours": sorted(BEHAVIOURS),
+        "topics": [*ALWAYS_TOPICS, *ON_DEMAND_TOPICS],
+        "checkpoints": [c["name"] for c in spec.checkpoints],
+        "course": sim.scene.course,
+    }
+
+
 @dataclass
 class ServerStats:
     """Counters a run reports: requests served, rejected messages, refused peers."""
@@ -167,28 +195,9 @@ class SimServer:
 
     def describe(self) -> dict[str, Any]:
         """Return what a client needs to know about this run (the hello reply)."""
-        spec = self.sim.spec
         return {
-            "world": spec.name,
-            "config": spec.config,
-            "title": spec.title,
-            "lockstep": self.settings.lockstep,
-            "timestep": TIMESTEP,
-            "time_limit_s": spec.time_limit_s,
-            "joints": [
-                {
-                    "name": j.name,
-                    "lower": j.lower,
-                    "upper": j.upper,
-                    "velocity": j.velocity,
-                    "effort": j.effort,
-                }
-                for j in ALL_JOINTS
-            ],
-            "behaviours": sorted(BEHAVIOURS),
-            "topics": [*ALWAYS_TOPICS, *ON_DEMAND_TOPICS],
-            "checkpoints": [c["name"] for c in spec.checkpoints],
-            "course": self.sim.scene.course,
+            **describe_run(self.sim, self.settings.lockstep),
+            "publish_port": self.settings.publish_port,
         }
 
     def _drain(self, timeout_ms: int) -> None:

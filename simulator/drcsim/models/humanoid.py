@@ -54,7 +54,7 @@ _LEFT_LIMBS = [
     ("l_arm_elx", "l_uarm", "l_larm", (0, 0.33, 0), "x", 0.0, 2.35, 12, 112, 600, 20),
     ("l_arm_wry", "l_larm", "l_ufarm", (0, 0.28, 0), "y", -3.14, 3.14, 12, 25, 150, 3),
     ("l_arm_wrx", "l_ufarm", "l_hand", (0, 0.03, 0), "x", -1.18, 1.18, 12, 25, 150, 3),
-    ("l_gripper", "l_hand", "l_finger", (0, 0.1, -0.04), "z", 0.0, 0.04, 0.2, 60, 2000, 20),
+    ("l_gripper", "l_hand", "l_finger", (0, 0.1, -0.04), "z", 0.0, 0.04, 0.5, 20, 2000, 20),
 ]
 # Joints whose limits are not symmetric about zero swap and negate them on the right side.
 _MIRRORED_LIMITS = ("l_leg_hpz", "l_arm_shz", "l_arm_elx")

@@ -1,0 +1,59 @@
+"""Fixtures for the simulator tests: in-process simulations and real servers on loopback."""
+
+from __future__ import annotations
+
+import subprocess
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from drcsim.bench import start_server, wait_ready
+from drcsim.engine import RunOptions, Simulation
+
+ServerFactory = Callable[..., tuple[subprocess.Popen[bytes], int]]
+
+
+@pytest.fixture
+def make_sim() -> Iterator[Callable[..., Simulation]]:
+    """Return a factory of simulations that are all closed after the test."""
+    made: list[Simulation] = []
+
+    def factory(world: str, config: str = "1", **options: object) -> Simulation:
+        sim = Simulation(world, config, RunOptions(**options))  # type: ignore[arg-type]
+        made.append(sim)
+        return sim
+
+    yield factory
+    for sim in made:
+        sim.close()
+
+
+@pytest.fixture
+def server(tmp_path: Path) -> Iterator[ServerFactory]:
+    """Start `drcsim serve` processes on free loopback ports; stop them by PID afterwards."""
+    processes: list[subprocess.Popen[bytes]] = []
+
+    def factory(
+        world: str = "vrc_task_2",
+        config: str = "1",
+        *extra: str,
+        logs: bool = False,
+        source: str = "127.0.0.1",
+    ) -> tuple[subprocess.Popen[bytes], int]:
+        log_dir = tmp_path / f"run-{len(processes)}" if logs else None
+        process, port = start_server(
+            world,
+            config,
+            ["--lockstep", *extra],
+            log_dir,
+            stderr=tmp_path / f"server-{len(processes)}.log",
+        )
+        processes.append(process)
+        wait_ready(port, process, source=source)
+        return process, port
+
+    yield factory
+    for process in processes:
+        if process.poll() is None:
+            process.terminate()
+        process.wait(timeout=30)

@@ -1,0 +1,38 @@
+"""Joint control: limits are enforced whatever the command."""
+
+from __future__ import annotations
+
+import numpy as np
+from drcsim.protocol import check_command
+
+
+def test_position_targets_beyond_limits_are_clamped(make_sim) -> None:
+    sim = make_sim("vrc_task_2")
+    c = sim.controller
+    # Arm joints: the stand behaviour owns the legs and trunk.
+    wanted = {"l_arm_elx": 5.0, "r_arm_wrx": -3.0, "r_arm_elx": 2.0, "l_arm_shx": -9.0}
+    assert sim.apply_command(check_command({"op": "joints", "position": wanted}))["ok"]
+    sim.step(1500)
+    for name in wanted:
+        slot = c.slot[name]
+        assert c.lower[slot] - 0.02 <= c.position[slot] <= c.upper[slot] + 0.02
+    elbow = c.slot["l_arm_elx"]
+    assert c.position[elbow] > c.upper[elbow] - 0.1  # it went as far as allowed
+
+
+def test_torques_are_clamped_to_effort_and_speed_limits(make_sim) -> None:
+    sim = make_sim("vrc_task_2")
+    c = sim.controller
+    torques = {"l_arm_wrx": 1e6, "r_gripper": -1e6, "r_arm_ely": 1e4}
+    assert sim.apply_command(check_command({"op": "joints", "torque": torques}))["ok"]
+    fastest = np.zeros(len(c.names))
+    for _ in range(300):
+        sim.step(1)
+        fastest = np.maximum(fastest, np.abs(c.velocity))
+        assert np.all(np.abs(c.applied) <= c.max_effort + 1e-9)
+    for name in torques:
+        slot = c.slot[name]
+        assert abs(c.applied[slot]) <= c.max_effort[slot]
+        # Past its limit a joint brakes at full effort: at most one step of overshoot.
+        assert fastest[slot] <= c.max_velocity[slot] * 1.3
+    assert fastest[c.slot["l_arm_wrx"]] > 1.0  # the torque did act

@@ -1,0 +1,111 @@
+"""The network API against a real `drcsim serve` process on loopback."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import msgpack
+import pytest
+from drcsim.client import SimClient
+from drcsim.errors import ClientError
+from drcsim.protocol import MAX_MESSAGE_BYTES
+
+ServerFactory = Callable[..., tuple[Any, int]]
+
+
+def test_hello_describes_the_run_and_lockstep_holds_time(server: ServerFactory) -> None:
+    _, port = server("vrc_task_2", "3")
+    with SimClient("127.0.0.1", port) as client:
+        info = client.hello()
+        assert info["world"] == "vrc_task_2" and info["config"] == "3"
+        assert len(info["joints"]) == 30 and info["joints"][0]["name"] == "back_bkz"
+        first = client.state()["step"]
+        assert client.state()["step"] == first  # nothing advances without a step command
+        assert client.step(25)["step"] == first + 25
+
+
+def test_client_outside_allow_list_is_refused(server: ServerFactory, tmp_path: Path) -> None:
+    _, port = server("vrc_task_2", "1", "--allow", "127.0.0.2", source="127.0.0.2")
+    with SimClient("127.0.0.1", port, timeout_s=1.0, source="127.0.0.3") as outsider:
+        with pytest.raises(ClientError, match="not allowed"):
+            outsider.hello()
+    with SimClient("127.0.0.1", port, source="127.0.0.2") as insider:
+        assert insider.hello()["ok"]
+    log = (tmp_path / "server-0.log").read_text()
+    assert "refused connection from 127.0.0.3" in log
+
+
+def test_malformed_and_oversized_messages_are_rejected_and_the_run_goes_on(
+    server: ServerFactory, tmp_path: Path
+) -> None:
+    _, port = server()
+    with SimClient("127.0.0.1", port) as client:
+        before = client.step(10)["step"]
+        bad_frames = [
+            [b"\xc1 definitely not msgpack"],
+            [msgpack.packb([1, 2, 3])],
+            [msgpack.packb({"op": "launch_missiles"})],
+            [msgpack.packb({"op": "joints", "position": {"no_such_joint": 1.0}})],
+            [msgpack.packb({"op": "joints", "position": {"l_leg_kny": float("nan")}})],
+            [msgpack.packb({"op": "step", "steps": -5})],
+            [msgpack.packb({"op": "behaviour", "name": "walk", "pose": "north"})],
+            [b"a", b"b", b"c"],
+            [b"\x00" * (MAX_MESSAGE_BYTES + 1)],
+        ]
+        for frames in bad_frames:
+            reply = client.send_raw(frames)
+            assert reply["ok"] is False and reply["error"]
+        assert client.step(10)["step"] == before + 10
+        assert client.behaviour("walk", pose=[1.0, 0.0, 0.0])["ok"]
+    log = (tmp_path / "server-0.log").read_text()
+    assert log.count("rejected message") == len(bad_frames)
+
+
+def test_sensors_are_published_only_to_subscribers(server: ServerFactory) -> None:
+    _, port = server(
+        "vrc_task_2",
+        "1",
+        "--sensor",
+        "camera_width=64",
+        "--sensor",
+        "camera_height=48",
+        "--sensor",
+        "lidar_beams=90",
+    )
+    with SimClient("127.0.0.1", port) as client:
+        client.subscribe("imu", "camera", "lidar", "score")
+        deadline = time.monotonic() + 20
+        seen: dict[str, dict] = {}
+        while len(seen) < 3 and time.monotonic() < deadline:
+            client.step(100)
+            while (received := client.receive(0.05)) is not None:
+                seen.setdefault(received[0], received[1])
+        assert {"imu", "camera", "lidar"} <= set(seen)
+        assert len(seen["camera"]["data"]) == 64 * 48 * 3
+        assert len(seen["lidar"]["ranges"]) == 90 * 4
+        assert abs(seen["imu"]["linear_acceleration"][2] - 9.81) < 1.0
+        assert "joint_states" not in seen and "contact" not in seen
+
+
+def test_real_time_mode_advances_on_its_own_and_refuses_step(tmp_path: Path) -> None:
+    from drcsim.bench import start_server, wait_ready
+
+    process, port = start_server("vrc_task_2", "1", [], stderr=tmp_path / "server.log")
+    try:
+        wait_ready(port, process)
+        with SimClient("127.0.0.1", port) as client:
+            client.subscribe("clock")
+            first = client.wait_for("clock")
+            later = client.wait_for("clock", lambda m: m["t"] >= first["t"] + 0.5)
+            assert later["step"] > first["step"]
+            reply = client.request({"op": "step", "steps": 1})
+            assert reply["ok"] is False and "lock-step" in reply["error"]
+            client.stop()
+        assert process.wait(timeout=30) == 0
+    finally:
+        if process.poll() is None:
+            process.terminate()
+            process.wait(timeout=30)
