@@ -8,7 +8,7 @@ install:
 	@bash deploy/install.sh
 
 run: install
-	$(BIN)/cloudsim up
+	$(BIN)/cloudsim up --demo
 
 test: install
 	$(BIN)/python -m pytest

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from typing import Any
 
+from flask import Response
 from flask.views import MethodView
 from flask_smorest import Blueprint
-from sqlalchemy import select
 
 from cloudsim.api.common import SelectPage, caller
-from cloudsim.api.schemas import ConstellationSchema
-from cloudsim.models import Constellation, Role
+from cloudsim.api.schemas import ConstellationSchema, JobSchema, LaunchedSchema, LaunchSchema
+from cloudsim.fleet import service
 
 blp = Blueprint("api_constellations", __name__, description="Constellations and machines")
 
@@ -21,8 +21,48 @@ class Constellations(MethodView):
     @blp.paginate(SelectPage, page_size=50, max_page_size=500)
     def get(self) -> Any:
         """List constellations (a team user: their team's only)."""
-        user = caller()
-        query = select(Constellation).order_by(Constellation.id)
-        if not user.has_role(Role.OFFICER):
-            query = query.where(Constellation.team_id == user.team_id)
-        return query
+        return service.visible_constellations(caller())
+
+    @blp.arguments(LaunchSchema)
+    @blp.response(202, LaunchedSchema)
+    def post(self, data: dict[str, Any]) -> Any:
+        """Launch a constellation (admins); follow the returned job."""
+        constellation, job = service.launch(caller(), **data)
+        return {"constellation": constellation, "job": job}
+
+
+@blp.route("/constellations/<int:ref>")
+class ConstellationById(MethodView):
+    @blp.response(200, ConstellationSchema)
+    def get(self, ref: int) -> Any:
+        """Return a constellation with its machines and their verification."""
+        return service.get_constellation(caller(), ref)
+
+    @blp.response(202, JobSchema)
+    def delete(self, ref: int) -> Any:
+        """Terminate a constellation (admins); follow the returned job."""
+        return service.terminate(caller(), ref)
+
+
+@blp.route("/constellations/<int:ref>/retry")
+class Retry(MethodView):
+    @blp.response(202, JobSchema)
+    def post(self, ref: int) -> Any:
+        """Launch again a constellation in error, resuming what exists (admins)."""
+        return service.retry(caller(), ref)
+
+
+@blp.route("/constellations/<int:ref>/ssh-bundle")
+class SshBundle(MethodView):
+    @blp.response(200, content_type="application/zip")
+    def get(self, ref: int) -> Any:
+        """Download the constellation's SSH key bundle (officers and admins)."""
+        filename, data = service.ssh_bundle(caller(), ref)
+        return Response(
+            data,
+            mimetype="application/zip",
+            headers={
+                "Content-Disposition": f'attachment; filename="{filename}"',
+                "Cache-Control": "no-store",
+            },
+        )

@@ -104,6 +104,7 @@ class MachineSchema(Schema):
     state = fields.Str()
     private_ip = fields.Str(allow_none=True)
     public_ip = fields.Str(allow_none=True)
+    verification = fields.Dict()
 
 
 class ConstellationSchema(Schema):
@@ -116,3 +117,15 @@ class ConstellationSchema(Schema):
     error = fields.Str(allow_none=True)
     created_at = fields.DateTime()
     machines = fields.List(fields.Nested(MachineSchema))
+
+
+class LaunchSchema(Schema):
+    name = fields.Str(required=True, validate=validate.Length(min=1, max=24))
+    kind = fields.Str(required=True, validate=validate.Length(min=1, max=32))
+    provider = fields.Str(load_default="local", validate=validate.Length(min=1, max=32))
+    team_id = fields.Int(allow_none=True, load_default=None)
+
+
+class LaunchedSchema(Schema):
+    constellation = fields.Nested(ConstellationSchema)
+    job = fields.Nested(JobSchema)

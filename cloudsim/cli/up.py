@@ -6,11 +6,15 @@ import os
 import sys
 
 import click
+from sqlalchemy import select
 
 from cloudsim import migrate
 from cloudsim.cli import app_context, reports_errors
 from cloudsim.config import Config
-from cloudsim.people.service import ensure_first_admin
+from cloudsim.extensions import db
+from cloudsim.fleet.service import launch
+from cloudsim.models import Constellation, ConstellationState, Team
+from cloudsim.people.service import create_team, ensure_first_admin
 from cloudsim.runtime.redis_server import redis_command
 from cloudsim.runtime.supervisor import Service, Supervisor, port_open
 
@@ -113,9 +117,42 @@ def _services(config: Config) -> list[tuple[Service, float]]:
     return services
 
 
+DEMO_TEAM = "Demo team"
+DEMO_CONSTELLATION = "demo"
+
+
+def _launch_demo(base_url: str) -> None:
+    """Launch a local vrc constellation for a demo team, unless one is already there."""
+    if os.geteuid() != 0:
+        click.echo("demo skipped: the local provider needs root", err=True)
+        return
+    with app_context():
+        existing = db.session.scalar(
+            select(Constellation).where(Constellation.name == DEMO_CONSTELLATION)
+        )
+        if existing is not None and existing.state != ConstellationState.TERMINATED:
+            click.echo(
+                f"demo constellation: {base_url}constellations/{existing.id} "
+                f"({existing.state.value})"
+            )
+            return
+        if existing is not None:
+            db.session.delete(existing)
+            db.session.commit()
+        team = db.session.scalar(select(Team).where(Team.name == DEMO_TEAM))
+        team = team or create_team(None, DEMO_TEAM)
+        created, _ = launch(
+            None, name=DEMO_CONSTELLATION, kind="vrc", provider="local", team_id=team.id
+        )
+        click.echo(
+            f"demo: launching a local vrc constellation: {base_url}constellations/{created.id}"
+        )
+
+
 @click.command()
+@click.option("--demo", is_flag=True, help="Also launch a local vrc constellation for a demo team.")
 @reports_errors
-def up() -> None:
+def up(demo: bool) -> None:
     """Run CloudSim on this machine until Ctrl-C: Redis (if needed), workers, beat, web."""
     with app_context() as app:
         config: Config = app.config["CLOUDSIM"]
@@ -130,6 +167,8 @@ def up() -> None:
         for service, timeout in _services(config):
             supervisor.add(service, timeout)
         click.echo(f"CloudSim is running at http://{config.bind}/  (Ctrl-C stops everything)")
+        if demo:
+            _launch_demo(f"http://{config.bind}/")
         supervisor.run()
     except RuntimeError as exc:
         raise click.ClickException(str(exc)) from None

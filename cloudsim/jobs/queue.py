@@ -39,13 +39,17 @@ def celery_init_app(app: Flask, config: Config) -> Celery:
                 "task": "cloudsim.jobs.sweep",
                 "schedule": timedelta(seconds=max(5, config.job_lease_seconds // 2)),
             },
+            "reconcile-providers": {
+                "task": "cloudsim.fleet.reconcile",
+                "schedule": timedelta(minutes=5),
+            },
         },
         timezone="UTC",
     )
     celery.set_default()
     app.extensions["celery"] = celery
     # Importing the task modules registers them with the app's Celery.
-    from cloudsim.fleet import engine  # noqa: F401
+    from cloudsim.fleet import engine, reconcile  # noqa: F401
     from cloudsim.jobs import diagnostics, runner, service  # noqa: F401
 
     return celery

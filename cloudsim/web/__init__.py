@@ -31,10 +31,11 @@ def register_web(app: Flask) -> None:
     from cloudsim.audit.views import bp as audit_bp
     from cloudsim.auth.views import bp as auth_bp
     from cloudsim.dashboard.views import bp as dashboard_bp
+    from cloudsim.fleet.views import bp as fleet_bp
     from cloudsim.jobs.views import bp as jobs_bp
     from cloudsim.people.views import bp as people_bp
 
-    for blueprint in (auth_bp, dashboard_bp, people_bp, jobs_bp, audit_bp):
+    for blueprint in (auth_bp, dashboard_bp, people_bp, fleet_bp, jobs_bp, audit_bp):
         app.register_blueprint(blueprint)
 
     app.jinja_env.globals.update(Role=Role, logout_form=ConfirmForm)

@@ -15,7 +15,7 @@ from flask import Flask
 from cloudsim.auth.tokens import issue_token
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
-from cloudsim.models import Role, Team, User
+from cloudsim.models import Constellation, ConstellationState, Role, Team, User
 from tests.conftest import log_in, make_user, token_for
 
 PERSONAS = ("anon", "user_a", "user_b", "officer", "admin")
@@ -45,6 +45,14 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("people.edit_user", "GET"): (LOGIN, 403, 403, 200, 200),
     ("people.edit_user", "POST"): (LOGIN, 403, 403, 400, 400),
     ("people.delete_user", "POST"): (LOGIN, 403, 403, 302, 302),
+    # web: constellations (team A's)
+    ("fleet.index", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("fleet.launch", "POST"): (LOGIN, 403, 403, 403, 400),
+    ("fleet.show", "GET"): (LOGIN, 200, 404, 200, 200),
+    ("fleet.status", "GET"): (LOGIN, 200, 404, 200, 200),
+    ("fleet.terminate", "POST"): (LOGIN, 403, 403, 403, 302),
+    ("fleet.retry", "POST"): (LOGIN, 403, 403, 403, 409),  # it is not in error
+    ("fleet.ssh_bundle", "GET"): (LOGIN, 403, 403, 200, 200),
     # web: jobs, audit
     ("jobs.index", "GET"): (LOGIN, 403, 403, 200, 200),
     ("jobs.start_diagnostics", "POST"): (LOGIN, 403, 403, 403, 302),
@@ -72,6 +80,11 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_jobs.JobById", "GET"): (401, 403, 403, 200, 200),
     ("api_audit.Audit", "GET"): (401, 403, 403, 200, 200),
     ("api_constellations.Constellations", "GET"): (401, 200, 200, 200, 200),
+    ("api_constellations.Constellations", "POST"): (401, 403, 403, 403, 202),
+    ("api_constellations.ConstellationById", "GET"): (401, 200, 404, 200, 200),
+    ("api_constellations.ConstellationById", "DELETE"): (401, 403, 403, 403, 202),
+    ("api_constellations.Retry", "POST"): (401, 403, 403, 403, 409),
+    ("api_constellations.SshBundle", "GET"): (401, 403, 403, 200, 200),
 }
 
 IGNORED_ENDPOINTS = {"static"}
@@ -90,6 +103,11 @@ def _bodies(team_id: int) -> dict[tuple[str, str], Callable[[], dict[str, Any]]]
         },
         ("api_people.UserById", "PATCH"): lambda: {"name": "Renamed"},
         ("api_jobs.Jobs", "POST"): lambda: {"kind": "diagnostics"},
+        ("api_constellations.Constellations", "POST"): lambda: {
+            "name": f"matrix-{next(_seq)}",
+            "kind": "vrc",
+            "team_id": team_id,
+        },
     }
 
 
@@ -110,7 +128,9 @@ def test_every_route_is_in_the_matrix(app: Flask) -> None:
     assert not stale, f"matrix entries for routes that no longer exist: {stale}"
 
 
-def _url(app: Flask, endpoint: str, team_a: Team, user_a: User, job_id: str) -> str:
+def _url(
+    app: Flask, endpoint: str, team_a: Team, user_a: User, job_id: str, constellation_id: int
+) -> str:
     """Build the URL, pointing every id at something of team A (fresh where it gets deleted)."""
     rule = next(r for r in app.url_map.iter_rules() if r.endpoint == endpoint)
     values: dict[str, Any] = {}
@@ -122,6 +142,8 @@ def _url(app: Flask, endpoint: str, team_a: Team, user_a: User, job_id: str) -> 
         values["token_id"] = issue_token(user_a, "victim").token.id
     if "job_id" in rule.arguments:
         values["job_id"] = job_id
+    if "ref" in rule.arguments:
+        values["ref"] = constellation_id
     with app.test_request_context():
         from flask import url_for
 
@@ -135,6 +157,15 @@ def test_route_answers_match_the_matrix(
     app.config["WTF_CSRF_ENABLED"] = False
     team_a = people["user_a"].team  # type: ignore[union-attr]
     job_id = enqueue("diagnostics", None, team_id=team_a.id).id
+    constellation = Constellation(
+        name="team-a-vrc",
+        kind="vrc",
+        provider="local",
+        team_id=team_a.id,
+        state=ConstellationState.READY,
+    )
+    db.session.add(constellation)
+    db.session.commit()
     user = people[persona]
     bodies = _bodies(team_a.id)
     headers = token_for(user) if user is not None else {}
@@ -144,7 +175,7 @@ def test_route_answers_match_the_matrix(
         log_in(client, user)
     # Logging out ends the session the other visits use: visit it last.
     for (endpoint, method), expected in sorted(MATRIX.items(), key=lambda i: i[0] == LOGOUT):
-        url = _url(app, endpoint, team_a, people["user_a"], job_id)  # type: ignore[arg-type]
+        url = _url(app, endpoint, team_a, people["user_a"], job_id, constellation.id)  # type: ignore[arg-type]
         api = url.startswith("/api/")
         body = bodies.get((endpoint, method), lambda: {})()
         if api:

@@ -49,6 +49,13 @@ def _count(model: type) -> int:
         ("PATCH", "/api/v1/users/4242", {"name": "x"}, 404, "not found"),
         ("DELETE", "/api/v1/tokens/4242", None, 404, "not found"),
         ("GET", "/api/v1/nothing-here", None, 404, "nothing here"),
+        ("POST", "/api/v1/constellations", {"name": "x", "kind": "moon"}, 400,
+         "unknown constellation kind 'moon' (known: cloudsim, simple, vrc)"),
+        ("POST", "/api/v1/constellations", {"name": "Bad Name!", "kind": "vrc"}, 400,
+         "constellation name must be"),
+        ("POST", "/api/v1/constellations", {"name": "x", "kind": "vrc", "provider": "mars"},
+         400, "unknown provider 'mars'"),
+        ("GET", "/api/v1/constellations/4242", None, 404, "not found"),
     ],
 )
 def test_api_rejects_bad_input_clearly(
@@ -110,6 +117,7 @@ def test_no_route_answers_500_to_garbage(app: Flask, people: dict[str, User | No
             "user_id",
             "job_id",
             "token_id",
+            "ref",
         }:
             continue
         path = (
@@ -118,6 +126,7 @@ def test_no_route_answers_500_to_garbage(app: Flask, people: dict[str, User | No
             .replace("<user_id>", "99")
             .replace("<job_id>", "x")
             .replace("<token_id>", "99")
+            .replace("<ref>", "99")
         )
         for method in rule.methods - {"HEAD", "OPTIONS"}:  # type: ignore[operator]
             if path.startswith("/api/"):
