@@ -98,10 +98,15 @@ _SYSTEMD_BOOT = (
     "set -euo pipefail\n"
     + _FIRST_BOOT
     + "host_dir=$1 hostname=$2 machine=$3 machine_id=$4 authorized_keys=$5 netns=$6\n"
-    + "shift 6\n"
+    + 'cgroup_count=$7\nshift 7\ncgroups=("${@:1:cgroup_count}")\nshift "$cgroup_count"\n'
     + _MOUNT_OVERLAY
     + r"""
 first_boot "$root" "$hostname" "$machine_id" "$authorized_keys" "$@"
+# A cgroup of its own, or this host's systemd would manage other hosts' services (cgroups.py).
+for cgroup in "${cgroups[@]}"; do
+  mkdir -p "$cgroup"
+  printf '%s\n' "$$" > "$cgroup/cgroup.procs"
+done
 propagate=/run/systemd/nspawn/propagate
 mkdir -p "$propagate"
 mount -t tmpfs -o mode=700 "$machine-propagate" "$propagate"
@@ -145,6 +150,7 @@ class HostSpec:
     node_dir: Path
     machine_id: str
     hidden_paths: tuple[Path, ...] = ()
+    cgroup_dirs: tuple[Path, ...] = ()
 
     @property
     def boot_log(self) -> Path:
@@ -224,7 +230,8 @@ def launch_command(spec: HostSpec, masked_units: list[str]) -> list[str]:
             "env", "SYSTEMD_NSPAWN_API_VFS_WRITABLE=network",
             "unshare", "--mount", "--propagation", "private", "--",
             "bash", "-c", _SYSTEMD_BOOT, "host-boot",
-            *common, str(spec.authorized_keys), spec.netns, *masked_units,
+            *common, str(spec.authorized_keys), spec.netns,
+            str(len(spec.cgroup_dirs)), *map(str, spec.cgroup_dirs), *masked_units,
         ]  # fmt: skip
     else:
         inner = [

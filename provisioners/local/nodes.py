@@ -16,6 +16,7 @@ from provisioners.local.addresses import (
     parse_address,
     parse_subnet,
 )
+from provisioners.local.cgroups import host_cgroup_dirs, remove_cgroup_dirs
 from provisioners.local.errors import HostBootError, LocalProviderError, NameInUseError
 from provisioners.local.network import NetworkManager
 from provisioners.local.state import STATUS_CREATING, STATUS_RUNNING, NodeRecord, StateStore
@@ -80,6 +81,7 @@ class NodeManager:
     def reboot(self, record: NodeRecord) -> None:
         """Restart the host's init on its existing filesystem and network namespace."""
         host.stop_host(record.launcher, record.init_process)
+        remove_cgroup_dirs(self.host_spec(record).cgroup_dirs, host.KILL_WAIT_SECONDS)
         record.launcher = record.init_process = None
         record.status = STATUS_CREATING
         record.creator = processes.identify(os.getpid())
@@ -92,6 +94,7 @@ class NodeManager:
         spec = self.host_spec(record)
         launcher = record.launcher or _launcher_from_pidfile(spec)
         host.stop_host(launcher, record.init_process)
+        remove_cgroup_dirs(spec.cgroup_dirs, host.KILL_WAIT_SECONDS)
         for pid in netns.namespace_pids(record.netns):
             # Stragglers joined the namespace from outside (nsenter); the namespace is ours.
             straggler = processes.identify(pid)
@@ -130,6 +133,7 @@ class NodeManager:
             node_dir=self._store.node_dir(record.name),
             machine_id=record.machine_id,
             hidden_paths=self._hidden_paths,
+            cgroup_dirs=tuple(Path(path) for path in record.cgroups),
         )
 
     def _reserve(self, request: NodeRequest) -> NodeRecord:
@@ -163,6 +167,9 @@ class NodeManager:
                 private_ip=str(lan_address),
                 public_ip=None if public_address is None else str(public_address),
                 machine_id=uuid.uuid4().hex,
+                cgroups=[str(path) for path in host_cgroup_dirs(f"{prefix}-{request.name}")]
+                if request.init == host.INIT_SYSTEMD
+                else [],
                 tags=dict(request.tags),
                 size=request.size,
                 image=request.image,

@@ -43,6 +43,7 @@ class NodeRecord:
     private_ip: str
     public_ip: str | None = None
     machine_id: str = ""
+    cgroups: list[str] = field(default_factory=list)
     tags: dict[str, str] = field(default_factory=dict)
     size: str = ""
     image: str = ""

@@ -136,6 +136,10 @@ def destroy_everything(state_dir: Path, prefix: str) -> list[str]:
     for mount_point in mounts_under(state_dir):
         leftovers.append(f"mount {mount_point}")
         subprocess.run(["umount", "--lazy", mount_point], check=True)
+    for cgroup in sorted(Path("/sys/fs/cgroup").glob(f"*/{prefix}-*")):
+        leftovers.append(f"cgroup {cgroup}")
+        for directory in sorted(cgroup.glob("**/"), key=lambda path: len(path.parts), reverse=True):
+            directory.rmdir()
     for path in sorted(state_dir.rglob("*")):
         if path.name != ".lock":
             leftovers.append(f"file {path}")

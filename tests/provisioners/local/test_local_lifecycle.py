@@ -16,6 +16,7 @@ from libcloud.compute.types import NodeState
 from local_support import HostShell, SshKey, mounts_under, needs_root
 
 from provisioners.local import processes, register
+from provisioners.local.cgroups import host_cgroup_dirs
 from provisioners.local.driver import LocalNodeDriver
 from provisioners.local.errors import (
     AddressError,
@@ -56,6 +57,7 @@ def _assert_nothing_left(
     assert not Path(f"/run/systemd/nspawn/propagate/{node.extra['machine']}").exists()
     assert not (state_dir / prefix / "nodes" / node.name).exists()
     assert not (state_dir / prefix / "hosts" / node.name).exists()
+    assert not any(path.exists() for path in host_cgroup_dirs(node.extra["machine"]))
 
 
 def test_destroy_removes_every_namespace_mount_process_and_file(
@@ -82,6 +84,35 @@ def test_destroy_removes_every_namespace_mount_process_and_file(
     assert driver.ex_destroy_network(network) is True
     assert list_namespaces(f"{host_prefix}-") == []
     assert [path.name for path in state_dir.iterdir()] == [".lock"]
+
+
+def test_systemd_hosts_do_not_manage_each_others_services(
+    driver: LocalNodeDriver, ssh_key: SshKey, shells: Shells
+) -> None:
+    network = driver.ex_create_network("twins")
+    nodes: list[Node] = []
+    try:
+        for name in ("twin-a", "twin-b"):
+            nodes.append(_create(driver, name, network, ssh_key, ex_init="systemd"))
+        cgroups = [Path(f"/proc/{node.extra['pid']}/cgroup").read_text() for node in nodes]
+        assert "/cst" in cgroups[0] and "-twin-a/" in cgroups[0]
+        assert "/cst" in cgroups[1] and "-twin-b/" in cgroups[1]
+        twin_a = shells(nodes[0], ssh_key)
+        twin_a.check("systemctl stop ssh.service")
+        assert twin_a.check("systemctl is-active ssh.service || true").strip() == "inactive"
+        twin_b = shells(nodes[1], ssh_key)
+        assert twin_b.check("systemctl is-active ssh.service").strip() == "active"
+        # Destroying a must leave b's processes alone: b boots a service, a goes away.
+        twin_b.check("systemd-run --unit=cloudsim-probe sleep 600")
+        twin_a.close()
+        driver.destroy_node(nodes[0])
+        assert twin_b.check("systemctl is-active cloudsim-probe.service").strip() == "active"
+        assert [n.state for n in driver.list_nodes()] == [NodeState.RUNNING]
+        assert shells(nodes[1], ssh_key).check("hostname").strip() == "twin-b"
+    finally:
+        for node in nodes:
+            driver.destroy_node(node)
+        driver.ex_destroy_network(network)
 
 
 def test_failed_boot_raises_with_the_boot_log_and_cleans_up(

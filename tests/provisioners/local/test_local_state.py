@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from provisioners.local import processes
+from provisioners.local.cgroups import host_cgroup_dirs
 from provisioners.local.host import units_to_mask
 from provisioners.local.processes import ProcessId
 from provisioners.local.state import NetworkRecord, NodeRecord, StateStore
@@ -124,3 +125,27 @@ def test_this_machines_enabled_services_would_be_masked_but_not_sshd() -> None:
     assert "ssh.service" not in masked
     if Path("/etc/systemd/system/multi-user.target.wants/postgresql.service").exists():
         assert "postgresql.service" in masked
+
+
+def test_host_cgroups_sit_below_our_own_in_the_systemd_hierarchies(tmp_path: Path) -> None:
+    (tmp_path / "cgroup").write_text(
+        "9:name=systemd:/worker.service\n4:memory:/box\n0::/worker.service\n"
+    )
+    (tmp_path / "mountinfo").write_text(
+        "31 23 0:28 / /sys/fs/cgroup rw,relatime - tmpfs tmpfs rw,mode=755\n"
+        "35 31 0:32 / /sys/fs/cgroup/memory rw,relatime - cgroup cgroup rw,memory\n"
+        "40 31 0:37 / /sys/fs/cgroup/systemd rw,relatime - cgroup cgroup rw,name=systemd\n"
+        "41 31 0:38 / /sys/fs/cgroup/unified rw,relatime - cgroup2 cgroup2 rw\n"
+    )
+    assert host_cgroup_dirs("cs-router", proc=tmp_path) == (
+        Path("/sys/fs/cgroup/systemd/worker.service/cs-router"),
+        Path("/sys/fs/cgroup/unified/worker.service/cs-router"),
+    )
+
+
+def test_host_cgroups_on_a_pure_cgroup2_machine(tmp_path: Path) -> None:
+    (tmp_path / "cgroup").write_text("0::/\n")
+    (tmp_path / "mountinfo").write_text(
+        "30 23 0:26 / /sys/fs/cgroup rw,nosuid - cgroup2 cgroup2 rw,nsdelegate\n"
+    )
+    assert host_cgroup_dirs("cs-sim", proc=tmp_path) == (Path("/sys/fs/cgroup/cs-sim"),)
