@@ -160,7 +160,7 @@ class SimServer:
     def _handle_command(self) -> None:
         frames = self.router.recv_multipart(copy=False)
         identity = frames[0].bytes
-        peer = frames[-1].get("Peer-Address") if len(frames) > 1 else "?"
+        peer = str(frames[-1].get("Peer-Address")) if len(frames) > 1 else "?"
         if len(frames) != 2:
             self._reject(identity, peer, f"expected one frame, got {len(frames) - 1}")
             return
