@@ -1,0 +1,91 @@
+"""Benchmark provisioning on the local provider: one vrc constellation, three at once, terminate.
+
+Needs root. Starts a private Redis and an in-process Celery worker (3 threads) on a fresh
+instance folder; the simulator's wheelhouse is built first and timed on its own (a real
+installation builds it once and caches it). Usage: python bench/provision.py
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+PROJECT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(PROJECT))
+
+from celery.contrib.testing.worker import start_worker  # noqa: E402
+
+from cloudsim.app import create_app  # noqa: E402
+from cloudsim.config import Config  # noqa: E402
+from cloudsim.extensions import db  # noqa: E402
+from cloudsim.fleet import service  # noqa: E402
+from cloudsim.fleet.engine import SIMULATOR_SOURCE  # noqa: E402
+from cloudsim.fleet.providers import make_driver  # noqa: E402
+from cloudsim.models import Job  # noqa: E402
+from constellations.plans.software import build_wheelhouse  # noqa: E402
+from tests.support.servers import RedisServer  # noqa: E402
+
+
+def wait(job_ids: list[str]) -> float:
+    """Wait for the jobs; return the seconds until the last one ended (fail loudly)."""
+    started = time.perf_counter()
+    while True:
+        db.session.expire_all()
+        jobs = [db.session.get(Job, job_id) for job_id in job_ids]
+        if all(job is not None and job.state.final for job in jobs):
+            failed = [job for job in jobs if job and job.state.value == "failed"]
+            if failed:
+                raise SystemExit(f"job failed: {failed[0].error}")
+            return time.perf_counter() - started
+        time.sleep(0.2)
+
+
+def main() -> None:
+    if os.geteuid() != 0:
+        raise SystemExit("bench/provision.py needs root (the local provider makes namespaces)")
+    instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-provision-"))
+    redis = RedisServer(instance / "redis")
+    env = {"CLOUDSIM_INSTANCE_DIR": str(instance), "CLOUDSIM_REDIS_URL": redis.url(),
+           "CLOUDSIM_LOCAL_PREFIX": "csbench", "CLOUDSIM_LOCAL_SUBNET_POOL": "10.214.0.0/16",
+           "CLOUDSIM_LOCAL_PUBLIC_CIDR": "198.18.14.0/24", "CLOUDSIM_LOG_LEVEL": "WARNING"}
+    app = create_app(Config.from_env(env))
+    try:
+        with app.app_context():
+            db.create_all()
+            started = time.perf_counter()
+            build_wheelhouse(SIMULATOR_SOURCE, instance / "wheelhouse")
+            wheelhouse = time.perf_counter() - started
+            with start_worker(app.extensions["celery"], pool="threads", concurrency=3,
+                              perform_ping_check=False, loglevel="WARNING",
+                              shutdown_timeout=60):
+                _, job = service.launch(None, name="bench-one", kind="vrc", provider="local")
+                one = wait([job.id])
+                names = [f"bench-{n}" for n in ("a", "b", "c")]
+                jobs = [service.launch(None, name=n, kind="vrc", provider="local")[1].id
+                        for n in names]
+                three = wait(jobs)
+                started = time.perf_counter()
+                terminate_one = wait([service.terminate(None, "bench-one").id])
+                terminate_three = wait([service.terminate(None, n).id for n in names])
+    finally:
+        with app.app_context():
+            driver = make_driver("local", app.config["CLOUDSIM"])
+            for node in driver.list_nodes():  # whatever a failed run left behind
+                driver.destroy_node(node)
+            for network in driver.ex_list_networks():
+                driver.ex_destroy_network(network)
+        redis.stop()
+    print("provisioning benchmark (local provider, vrc = router + sim + fc1 + fc2)")
+    print(f"  wheelhouse build (once, cached)        {wheelhouse:6.1f} s")
+    print(f"  one constellation to ready             {one:6.1f} s   (target < 60 s)")
+    print(f"  three at once to ready                 {three:6.1f} s   "
+          f"ratio {three / one:.2f} x one (target < 2)")
+    print(f"  terminate one                          {terminate_one:6.1f} s")
+    print(f"  terminate three at once                {terminate_three:6.1f} s")
+
+
+if __name__ == "__main__":
+    main()
