@@ -1,4 +1,4 @@
-"""Benchmark the local provider: create a network + N hosts in parallel, memory per host, destroy.
+"""Benchmark the local provider: a network + N hosts created at once, memory per host, destroy.
 
 Run as root: `.venv/bin/python bench/local_hosts.py [--nodes 4] [--init systemd|minimal|both]`.
 """
@@ -31,15 +31,6 @@ class Figures:
     destroy_seconds: float
     pss_mib_per_host: float
     tmpfs_mib_per_host: float
-    available_drop_mib_per_host: float
-
-
-def mem_available_kib() -> int:
-    """Return MemAvailable from /proc/meminfo."""
-    for line in Path("/proc/meminfo").read_text().splitlines():
-        if line.startswith("MemAvailable:"):
-            return int(line.split()[1])
-    raise RuntimeError("no MemAvailable in /proc/meminfo")
 
 
 def host_pss_kib(node: Node) -> int:
@@ -64,7 +55,6 @@ def run_round(driver: LocalNodeDriver, init: str, count: int, settle: float) -> 
         .public_bytes(Encoding.OpenSSH, PublicFormat.OpenSSH)
     )
     auth = NodeAuthSSHKey(public_key.decode())
-    available_before = mem_available_kib()
     started = time.monotonic()
     network = driver.ex_create_network(f"bench-{init}")
     with ThreadPoolExecutor(max_workers=count) as pool:
@@ -81,7 +71,6 @@ def run_round(driver: LocalNodeDriver, init: str, count: int, settle: float) -> 
     time.sleep(settle)
     pss = sum(host_pss_kib(node) for node in nodes) / count
     tmpfs = tmpfs_used_kib(driver.hosts_dir) / count
-    available_drop = (available_before - mem_available_kib()) / count
     started = time.monotonic()
     with ThreadPoolExecutor(max_workers=count) as pool:
         assert all(pool.map(driver.destroy_node, nodes))
@@ -94,7 +83,6 @@ def run_round(driver: LocalNodeDriver, init: str, count: int, settle: float) -> 
         destroy_seconds=destroy_seconds,
         pss_mib_per_host=pss / 1024,
         tmpfs_mib_per_host=tmpfs / 1024,
-        available_drop_mib_per_host=available_drop / 1024,
     )
 
 
@@ -125,12 +113,12 @@ def main() -> int:
         shutil.rmtree(state_dir)
     header = ["init", "hosts", "create s", "destroy s", "PSS MiB/host", "tmpfs MiB/host"]
     print(f"{header[0]:8} {header[1]:>5} {header[2]:>9} {header[3]:>9} {header[4]:>12} "
-          f"{header[5]:>14} {'MemAvailable drop MiB/host':>26}")  # fmt: skip
+          f"{header[5]:>14}")  # fmt: skip
     for figures in results:
         print(
             f"{figures.init:8} {figures.nodes:5d} {figures.create_seconds:9.2f} "
             f"{figures.destroy_seconds:9.2f} {figures.pss_mib_per_host:12.1f} "
-            f"{figures.tmpfs_mib_per_host:14.1f} {figures.available_drop_mib_per_host:26.1f}"
+            f"{figures.tmpfs_mib_per_host:14.1f}"
         )
     return 0
 

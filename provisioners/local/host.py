@@ -12,7 +12,7 @@ from pathlib import Path
 
 from provisioners.local import processes
 from provisioners.local.commands import run_command
-from provisioners.local.errors import HostBootError, InvalidRequestError
+from provisioners.local.errors import CommandError, HostBootError, InvalidRequestError
 from provisioners.local.netns import can_connect, netns_path
 from provisioners.local.processes import ProcessId
 
@@ -322,6 +322,20 @@ def boot_log_tail(spec: HostSpec, lines: int = 30) -> str:
         return "(no boot log)"
     text = _ANSI_ESCAPE.sub("", spec.boot_log.read_text(errors="replace"))
     return "\n".join(text.splitlines()[-lines:])
+
+
+def systemd_journal_tail(init: ProcessId | None, lines: int = 30) -> str:
+    """Return the end of a booting systemd host's journal, or why it could not be read."""
+    if init is None or not processes.is_alive(init):
+        return "(the host's init is not running)"
+    command = [
+        "nsenter", f"--target={init.pid}", "--mount", "--pid", "--uts", "--ipc", "--net",
+        "journalctl", "--boot", "--no-pager", f"--lines={lines}",
+    ]  # fmt: skip
+    try:
+        return run_command(command, timeout=10).rstrip()
+    except CommandError as error:
+        return f"(cannot read the host's journal: {error})"
 
 
 def remove_host_files(spec: HostSpec) -> None:

@@ -66,6 +66,9 @@ class NodeManager:
             self._boot(record, spec)
         except BaseException as error:
             log_tail = host.boot_log_tail(spec)
+            if record.init == host.INIT_SYSTEMD:
+                journal = host.systemd_journal_tail(record.init_process)
+                log_tail = f"{log_tail}\n--- journal of {record.name} ---\n{journal}"
             try:
                 self.destroy(record)
             except LocalProviderError as cleanup_error:

@@ -115,24 +115,35 @@ def test_systemd_hosts_do_not_manage_each_others_services(
         driver.ex_destroy_network(network)
 
 
+@pytest.mark.parametrize(
+    ("init", "evidence"), [("minimal", "/usr/sbin/sshd"), ("systemd", "ssh.service")]
+)
 def test_failed_boot_raises_with_the_boot_log_and_cleans_up(
-    make_driver: Callable[[], LocalNodeDriver], ssh_key: SshKey, state_dir: Path, host_prefix: str
+    make_driver: Callable[[], LocalNodeDriver],
+    ssh_key: SshKey,
+    state_dir: Path,
+    host_prefix: str,
+    init: str,
+    evidence: str,
 ) -> None:
-    # A machine without sshd: its init cannot start the one service a host must run.
+    # A machine without sshd: it can never become ready.
     broken = LocalNodeDriver(
-        state_dir=str(state_dir), prefix=host_prefix, hidden_paths=["/usr/sbin/sshd"]
+        state_dir=str(state_dir),
+        prefix=host_prefix,
+        hidden_paths=["/usr/sbin/sshd"],
+        boot_timeout=5,
     )
     network = broken.ex_create_network("doomed")
     try:
         with pytest.raises(HostBootError) as raised:
-            _create(broken, "doomed", network, ssh_key, ex_init="minimal")
+            _create(broken, "doomed", network, ssh_key, ex_init=init)
         message = str(raised.value)
         assert "creating node doomed failed" in message
-        assert "--- boot log of doomed" in message
-        assert "/usr/sbin/sshd" in message.split("--- boot log of doomed")[1]
+        assert evidence in message.split("--- boot log of doomed")[1]
         assert make_driver().list_nodes() == []
         assert f"{host_prefix}-h-doomed" not in list_namespaces(f"{host_prefix}-")
         assert not (state_dir / host_prefix / "nodes" / "doomed").exists()
+        assert not any(path.exists() for path in host_cgroup_dirs(f"{host_prefix}-doomed"))
         assert mounts_under(state_dir) == []
     finally:
         broken.ex_destroy_network(network)
