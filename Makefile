@@ -16,10 +16,13 @@ test: install
 lint: install
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/mypy cloudsim provisioners constellations
+	$(BIN)/mypy cloudsim provisioners constellations simulator/drcsim
 
 bench: install
 	$(BIN)/python bench/web.py
+	$(BIN)/python bench/provision.py
+	$(BIN)/python bench/local_hosts.py
+	$(BIN)/drcsim bench
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache .mypy_cache

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextvars
 import itertools
+import logging
 import re
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -15,6 +16,7 @@ import redis
 from cryptography.fernet import Fernet
 from flask import Flask
 from flask.testing import FlaskClient
+from moto.server import ThreadedMotoServer
 
 from cloudsim.app import create_app
 from cloudsim.auth.tokens import issue_token
@@ -22,7 +24,7 @@ from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.models import Role, Team, User
 from cloudsim.people import service
-from tests.support.servers import PostgresServer, RedisServer
+from tests.support.servers import MotoEndpoint, PostgresServer, RedisServer
 
 PASSWORD = "correct horse battery"
 _names = itertools.count(1)
@@ -39,6 +41,18 @@ def redis_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RedisServ
 def postgres_server() -> Iterator[PostgresServer]:
     server = PostgresServer()
     yield server
+    server.stop()
+
+
+@pytest.fixture(scope="session")
+def moto_endpoint() -> Iterator[MotoEndpoint]:
+    """moto's EC2 server, in-process on a free loopback port, for the whole session."""
+    # moto's request log is noise in test output; failures surface as EC2 errors instead.
+    logging.getLogger("werkzeug").setLevel(logging.ERROR)
+    server = ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
+    server.start()
+    host, port = server.get_host_and_port()
+    yield MotoEndpoint(host, port)
     server.stop()
 
 

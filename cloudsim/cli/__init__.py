@@ -67,13 +67,14 @@ def main(ctx: click.Context) -> None:
 
 
 def _register() -> None:
-    from cloudsim.cli import db, fleet, people, up
+    from cloudsim.cli import db, fleet, people, providers, up
 
     main.add_command(up.up)
     main.add_command(db.db)
     main.add_command(people.team)
     main.add_command(people.user)
     main.add_command(fleet.constellation)
+    main.add_command(providers.provider)
 
 
 _register()

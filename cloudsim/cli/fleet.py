@@ -11,9 +11,8 @@ from cloudsim.cli import app_context, emit, reports_errors
 from cloudsim.extensions import db
 from cloudsim.fleet import service
 from cloudsim.fleet.connect import MachineHostKeys, targets
-from cloudsim.fleet.engine import nodes_of
 from cloudsim.fleet.keys import constellation_keypair
-from cloudsim.fleet.providers import PROVIDERS, make_driver
+from cloudsim.fleet.providers import PROVIDERS, open_provider
 from cloudsim.fleet.reconcile import destroy_orphans, find_orphans
 from cloudsim.models import Constellation, Job
 from cloudsim.people.service import find_team
@@ -199,8 +198,8 @@ def ssh(name: str, machine: str, command: tuple[str, ...]) -> None:
     with app_context() as app:
         found = service.get_constellation(None, name)
         keys = constellation_keypair(found)
-        driver = make_driver(found.provider, app.config["CLOUDSIM"])
-        reach = targets(found, nodes_of(driver, found), keys)
+        provider = open_provider(found.provider, app.config["CLOUDSIM"])
+        reach = targets(found, provider.nodes(found.name), keys)
         if machine not in reach:
             raise click.ClickException(
                 f"{name} has no machine {machine!r} (machines: {', '.join(reach)})"

@@ -21,7 +21,7 @@ from cloudsim.errors import CloudSimError, NotFound
 from cloudsim.extensions import db
 from cloudsim.fleet.connect import MachineHostKeys, targets
 from cloudsim.fleet.keys import KeyPair, constellation_keypair
-from cloudsim.fleet.providers import NetworkDriver, make_driver
+from cloudsim.fleet.providers import NetworkDriver, Provider, open_provider
 from cloudsim.fleet.verify import verify_constellation
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.models import Constellation, ConstellationState, MachineState, Secret
@@ -36,6 +36,7 @@ T = TypeVar("T")
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
 SIMULATOR_SOURCE = PROJECT_ROOT / "simulator"
 NEEDS_WHEELHOUSE = {"simulator", "field_computer"}
+BOOTING = (NodeState.PENDING, NodeState.STARTING, NodeState.REBOOTING)
 
 
 class ProvisioningError(CloudSimError):
@@ -47,15 +48,6 @@ def _constellation(ctx: JobContext) -> Constellation:
     if constellation is None:
         raise NotFound(f"constellation {ctx.job.target_id} no longer exists")
     return constellation
-
-
-def nodes_of(driver: NetworkDriver, constellation: Constellation) -> list[Node]:
-    """Return the provider's nodes that belong to the constellation."""
-    return [
-        node
-        for node in driver.list_nodes()
-        if node.extra.get("tags", {}).get("cloudsim:constellation") == constellation.name
-    ]
 
 
 @job_kind("constellation.launch")
@@ -87,11 +79,12 @@ def _launch(
 ) -> None:
     ctx.stage("keys", 2)
     keys = constellation_keypair(constellation)
-    driver = make_driver(constellation.provider, config)
+    provider = open_provider(constellation.provider, config)
+    driver = provider.driver
     ctx.stage("network", 5)
-    subnet = _ensure_network(ctx, driver, constellation, kind)
+    subnet = ensure_network(ctx, driver, constellation, kind)
     ctx.stage("machines", 10)
-    nodes = _ensure_machines(ctx, driver, constellation, kind, keys, subnet)
+    nodes = ensure_machines(ctx, provider, constellation, kind, keys, subnet)
     executor = SSHExecutor(
         MachineHostKeys(constellation),
         log_sink=ctx.line_sink(),
@@ -121,15 +114,14 @@ def _launch(
         }
         _deploy(ctx, executor, reach, plans)
         ctx.stage("verify", 80)
-        public_probe = getattr(driver, "ex_public_proxy_command", None)
-        verify_constellation(ctx, executor, constellation, kind, reach, public_probe)
+        verify_constellation(ctx, executor, constellation, kind, reach, provider.public_probe)
 
 
 def _network(driver: NetworkDriver, constellation: Constellation) -> Any:
     return driver.ex_get_network(constellation.name)
 
 
-def _ensure_network(
+def ensure_network(
     ctx: JobContext, driver: NetworkDriver, constellation: Constellation, kind: ConstellationKind
 ) -> str:
     """Create the private network once; return its subnet."""
@@ -151,23 +143,28 @@ def _ensure_network(
     return str(network.cidr)
 
 
-def _ensure_machines(
+def ensure_machines(
     ctx: JobContext,
-    driver: NetworkDriver,
+    provider: Provider,
     constellation: Constellation,
     kind: ConstellationKind,
     keys: KeyPair,
     subnet: str,
 ) -> list[Node]:
     """Create every machine the provider does not have running; replace broken ones."""
+    driver = provider.driver
     network = _network(driver, constellation)
     have = {
-        node.extra["tags"].get("cloudsim:machine"): node for node in nodes_of(driver, constellation)
+        node.extra["tags"].get("cloudsim:machine"): node
+        for node in provider.nodes(constellation.name)
     }
-    wanted = [m for m in kind.machines]
+    wanted = list(kind.machines)
     for definition in wanted:
         node = have.get(definition.name)
-        if node is not None and node.state != NodeState.RUNNING:
+        if node is not None and node.state in BOOTING:
+            ctx.log(f"{definition.name}: still {node.state}; waiting for it")
+            have[definition.name] = driver.wait_until_running([node])[0][0]  # type: ignore[attr-defined]
+        elif node is not None and node.state != NodeState.RUNNING:
             ctx.log(f"{definition.name}: found {node.state}; replacing it")
             driver.destroy_node(node)
             del have[definition.name]
@@ -176,14 +173,14 @@ def _ensure_machines(
     for definition in missing:
         rows[definition.name].state = MachineState.CREATING
     db.session.commit()
-    size = driver.list_sizes()[0]
-    image = driver.list_images()[0]
+    image = provider.image()
+    sizes = {m.name: provider.size(m.size) for m in missing}
     name = constellation.name  # plain values only: the threads have no database session
 
     def create(definition: Any) -> Node:
         return driver.create_node(
             name=f"{name}-{definition.name}",
-            size=size,
+            size=sizes[definition.name],
             image=image,
             auth=NodeAuthSSHKey(keys.public),
             ex_network=network,
@@ -280,8 +277,9 @@ def terminate_constellation(ctx: JobContext) -> None:
     config: Config = current_app.config["CLOUDSIM"]
     constellation.state = ConstellationState.TERMINATING
     ctx.stage("machines", 10)
-    driver = make_driver(constellation.provider, config)
-    nodes = nodes_of(driver, constellation)
+    provider = open_provider(constellation.provider, config)
+    driver = provider.driver
+    nodes = provider.nodes(constellation.name)
     for machine in constellation.machines:
         machine.state = MachineState.TERMINATING
     db.session.commit()

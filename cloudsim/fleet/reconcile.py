@@ -12,8 +12,9 @@ from sqlalchemy import select
 
 from cloudsim.audit.service import record
 from cloudsim.config import Config
+from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
-from cloudsim.fleet.providers import PROVIDERS, make_driver
+from cloudsim.fleet.providers import PROVIDERS, open_provider, provider_settings
 from cloudsim.models import Constellation, ConstellationState, User
 
 log = logging.getLogger(__name__)
@@ -30,8 +31,19 @@ class Orphan:
 
 
 def _providers_in_reach(config: Config) -> list[str]:
-    # The local provider needs root; without it there can be no local nodes of ours either.
-    return [p for p in PROVIDERS if p != "local" or os.geteuid() == 0]
+    """Return the providers to look at: local when root, clouds once configured."""
+    reachable = []
+    for name in PROVIDERS:
+        if name == "local":
+            if os.geteuid() == 0:  # without root there can be no local nodes of ours either
+                reachable.append(name)
+            continue
+        try:
+            provider_settings(name)
+        except CloudSimError:
+            continue
+        reachable.append(name)
+    return reachable
 
 
 def find_orphans(config: Config) -> list[Orphan]:
@@ -43,8 +55,7 @@ def find_orphans(config: Config) -> list[Orphan]:
     )
     orphans = []
     for provider in _providers_in_reach(config):
-        driver = make_driver(provider, config)
-        for node in driver.list_nodes():
+        for node in open_provider(provider, config).nodes():
             owner = node.extra.get("tags", {}).get("cloudsim:constellation")
             if owner not in live:
                 orphans.append(Orphan(provider, str(node.id), node.name, owner))
@@ -54,7 +65,7 @@ def find_orphans(config: Config) -> list[Orphan]:
 def destroy_orphans(actor: User | None, config: Config) -> list[Orphan]:
     """Destroy every orphan node; return what was destroyed."""
     orphans = find_orphans(config)
-    drivers = {p: make_driver(p, config) for p in {o.provider for o in orphans}}
+    drivers = {p: open_provider(p, config).driver for p in {o.provider for o in orphans}}
     for orphan in orphans:
         driver = drivers[orphan.provider]
         node = next((n for n in driver.list_nodes() if str(n.id) == orphan.node_id), None)

@@ -15,8 +15,7 @@ from flask import Flask
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.fleet import service
-from cloudsim.fleet.engine import nodes_of
-from cloudsim.fleet.providers import make_driver
+from cloudsim.fleet.providers import open_provider
 from cloudsim.jobs.service import sweep_jobs
 from cloudsim.models import ConstellationState, Job, JobState
 from tests.fleet.conftest import finished, leftovers
@@ -103,7 +102,7 @@ def test_launch_resumes_after_the_worker_is_killed_mid_machines(
         assert done.attempts == 2 and "resuming after an interrupted attempt" in done.log
         db.session.refresh(constellation)
         assert constellation.state == ConstellationState.READY
-        nodes = nodes_of(make_driver("local", fleet_config), constellation)
+        nodes = open_provider("local", fleet_config).nodes(constellation.name)
         assert sorted(n.extra["tags"]["cloudsim:machine"] for n in nodes) == [
             "fc1",
             "fc2",

@@ -10,6 +10,7 @@ import subprocess
 import tempfile
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 from cloudsim.runtime.redis_server import redis_command
@@ -138,3 +139,15 @@ class PostgresServer:
     def stop(self) -> None:
         self._as_postgres([self.pg_ctl, "-D", str(self.data), "-m", "immediate", "-w", "stop"])
         shutil.rmtree(self.root, ignore_errors=True)
+
+
+@dataclass(frozen=True)
+class MotoEndpoint:
+    """Where the session's moto EC2 server listens (the one cloud API that is mocked)."""
+
+    host: str
+    port: int
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}"

@@ -1,47 +1,22 @@
 """Fixtures for the EC2 provider: one in-process moto EC2 server per session, drivers on it."""
 
 import itertools
-import logging
 import re
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from collections.abc import Callable
 from typing import Any
 
 import pytest
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from libcloud.compute.base import NodeImage, NodeSize
-from moto.server import ThreadedMotoServer
 
 from provisioners.ec2.driver import CloudSimEC2NodeDriver
+from tests.support.servers import MotoEndpoint
 
 ACCESS_KEY_ID = "AKIDCLOUDSIMTEST"
 SECRET_ACCESS_KEY = "cloudsim-test-secret-0123456789"
 SIZE_ID = "t3.micro"
 _names = itertools.count(1)
-
-
-@dataclass(frozen=True)
-class MotoEndpoint:
-    """Where the session's moto server listens."""
-
-    host: str
-    port: int
-
-    @property
-    def url(self) -> str:
-        return f"http://{self.host}:{self.port}"
-
-
-@pytest.fixture(scope="session")
-def moto_endpoint() -> Iterator[MotoEndpoint]:
-    # moto's request log is noise in test output; failures surface as EC2 errors instead.
-    logging.getLogger("werkzeug").setLevel(logging.ERROR)
-    server = ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
-    server.start()
-    host, port = server.get_host_and_port()
-    yield MotoEndpoint(host, port)
-    server.stop()
 
 
 @pytest.fixture
