@@ -3,6 +3,7 @@
 import datetime
 import functools
 import os
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Concatenate, ParamSpec, TypeVar
@@ -16,6 +17,7 @@ from libcloud.compute.base import (
     NodeLocation,
     NodeSize,
 )
+from libcloud.compute.types import NodeState
 
 from provisioners.local import host, netns
 from provisioners.local.addresses import check_name, check_prefix, parse_address, parse_subnet
@@ -195,6 +197,45 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
             raise LocalProviderError(f"no node {node.name!r} under prefix {self.prefix!r}")
         self._nodes.reboot(record)
         return True
+
+    @requires_root
+    def wait_until_running(
+        self,
+        nodes: list[Node],
+        wait_period: float = 0.5,
+        timeout: float = 600,
+        ssh_interface: str = "private_ips",
+        force_ipv4: bool = True,
+        ex_list_nodes_kwargs: dict[str, Any] | None = None,
+    ) -> list[tuple[Node, list[str]]]:
+        """Wait until every node runs; fail at once for a node that never will.
+
+        Local hosts are reached on their private address (through ssh_proxy_command), so that
+        is the default interface, unlike libcloud's "public_ips".
+        """
+        if ssh_interface not in ("public_ips", "private_ips"):
+            raise InvalidRequestError("ssh_interface must be public_ips or private_ips")
+        deadline = time.monotonic() + timeout
+        while True:
+            current = {node.id: node for node in self.list_nodes()}
+            states = [(node, current.get(node.id)) for node in nodes]
+            hopeless = [
+                f"{node.name} ({'gone' if now is None else now.state})"
+                for node, now in states
+                if now is None
+                or now.state not in (NodeState.RUNNING, NodeState.PENDING)
+                or (now.state == NodeState.RUNNING and not getattr(now, ssh_interface))
+            ]
+            if hopeless:
+                raise LocalProviderError(
+                    f"nodes that will not run with {ssh_interface}: {', '.join(hopeless)}"
+                )
+            running = [now for _node, now in states if now is not None]
+            if all(now.state == NodeState.RUNNING for now in running):
+                return [(now, list(getattr(now, ssh_interface))) for now in running]
+            if time.monotonic() >= deadline:
+                raise LocalProviderError(f"nodes still pending after {timeout:.0f} s")
+            time.sleep(wait_period)
 
     @requires_root
     def list_sizes(self, location: NodeLocation | None = None) -> list[NodeSize]:

@@ -193,10 +193,11 @@ def test_fresh_driver_rediscovers_running_nodes(
         assert again.private_ips == original.private_ips
         assert again.public_ips == original.public_ips
     assert [network.cidr for network in fresh.ex_list_networks()] == [lan.network.cidr]
-    running = fresh.wait_until_running(
-        [found["router"], found["sim"]], wait_period=0.1, timeout=10, ssh_interface="private_ips"
-    )
-    assert {node.name for node, _ips in running} == {"router", "sim"}
+    running = fresh.wait_until_running([found["router"], found["sim"]], timeout=10)
+    assert [(node.name, ips) for node, ips in running] == [
+        ("router", lan.router.private_ips),
+        ("sim", lan.sim.private_ips),
+    ]
 
 
 def test_recorded_pid_is_identified_by_start_time(lan: Lan) -> None:

@@ -22,6 +22,7 @@ from provisioners.local.errors import (
     AddressError,
     HostBootError,
     InvalidRequestError,
+    LocalProviderError,
     NameInUseError,
     NetworkInUseError,
     NetworkNotFoundError,
@@ -131,7 +132,7 @@ def test_failed_boot_raises_with_the_boot_log_and_cleans_up(
         state_dir=str(state_dir),
         prefix=host_prefix,
         hidden_paths=["/usr/sbin/sshd"],
-        boot_timeout=5,
+        boot_timeout=3,
     )
     network = broken.ex_create_network("doomed")
     try:
@@ -270,6 +271,10 @@ def test_a_host_whose_init_died_is_stopped_and_still_destroyed_cleanly(
         processes.kill(recorded[0], timeout=10)
         assert processes.wait_until_gone(recorded[1], timeout=10)
         assert [n.state for n in driver.list_nodes()] == [NodeState.STOPPED]
+        with pytest.raises(
+            LocalProviderError, match=r"will not run with private_ips: crash \(stopped\)"
+        ):
+            driver.wait_until_running([node], timeout=30)
     finally:
         driver.destroy_node(node)
         driver.ex_destroy_network(network)
