@@ -132,6 +132,8 @@ DEFAULT_HIDDEN_PATHS = (
     "/var/backups",
     "/var/lib/postgresql",
     "/var/lib/redis",
+    # Without its data dir the controller's cluster config would only confuse pg_ctlcluster.
+    "/etc/postgresql",
 )
 OPAQUE_XATTR = "trusted.overlay.opaque"
 

@@ -105,6 +105,9 @@ def test_controller_secrets_are_hidden_from_hosts(
         assert sorted(shell.check("ls -A /root").split()) == [".bashrc", ".profile", ".ssh"]
         assert shell.check("ls -A /root/.ssh").split() == ["authorized_keys"]
         assert shell.check("ls -A /home").strip() == ""
+        for server_data in ("/var/lib/postgresql", "/etc/postgresql"):
+            if Path(server_data).is_dir():
+                assert shell.check(f"ls -A {server_data}").strip() == ""
         # The rest of the machine's root is there: hosts run its programs.
         shell.check("test -x /usr/sbin/sshd && test -s /etc/os-release")
 
