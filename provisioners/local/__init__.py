@@ -1,4 +1,12 @@
-"""The `local` provider: real hosts on this machine, as an apache-libcloud NodeDriver."""
+"""The `local` provider: real hosts on this machine, as an apache-libcloud NodeDriver.
+
+A network is a bridge inside its own "switch" network namespace; a host is a network
+namespace wired to it by a veth pair, an overlay of this machine's "/" (upper dir on a tmpfs
+under state_dir) and either systemd booted by systemd-nspawn or tini running sshd, in fresh
+PID/mount/UTS/IPC namespaces. Records under state_dir/<prefix>/ let any later driver find,
+report and destroy what an earlier one made. Modules: driver (the libcloud API), network and
+nodes (lifecycles), host (boot/stop one host), netns, cgroups, processes, state, addresses.
+"""
 
 from typing import cast
 

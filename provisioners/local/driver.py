@@ -62,7 +62,6 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
 
     type = "local"
     name = "CloudSim local hosts"
-    website = "https://github.com/cloudsim"
     features = {"create_node": ["ssh_key"]}
 
     def __init__(
