@@ -202,6 +202,8 @@ def ensure_machines(
         row = rows[name]
         row.provider_node_id = str(node.id)
         row.public_ip = node.public_ips[0] if node.public_ips else None
+        # Providers of existing machines (servers) decide the address; clouds honour ours.
+        row.private_ip = node.private_ips[0] if node.private_ips else row.private_ip
         row.state = MachineState.RUNNING
     db.session.commit()
     return list(nodes.values())
@@ -234,7 +236,7 @@ def _plan_context(
         kind=kind,
         machine=kind.machine(name),
         subnet=subnet,
-        addresses={m.name: m.address(subnet) for m in kind.machines},
+        addresses={m.name: m.private_ip or "" for m in constellation.machines},
     )
 
 

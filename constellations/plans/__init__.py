@@ -10,7 +10,8 @@ from collections.abc import Callable
 
 from constellations.plans.base import Action, PlanContext, PlanItem
 from constellations.plans.common import common, firewall
-from constellations.plans.roles import cloudsim_server, field_computer, router, simulator
+from constellations.plans.roles import cloudsim_server, field_computer, simulator
+from constellations.plans.router import router
 
 Plan = Callable[[PlanContext], list[PlanItem]]
 

@@ -27,6 +27,18 @@ PlanItem = Operation | Action
 
 
 @dataclass(frozen=True)
+class VpnMaterial:
+    """What the router's VPN server needs: the constellation's PKI (PEM) and tunnel settings."""
+
+    ca_cert: str
+    server_cert: str
+    server_key: str = field(repr=False)
+    crl: str = ""
+    network: str = "10.8.0.0/24"  # addresses handed to VPN clients
+    port: int = 1194
+
+
+@dataclass(frozen=True)
 class PlanContext:
     """Everything a plan may use about the machine it deploys and its constellation."""
 
@@ -37,6 +49,7 @@ class PlanContext:
     subnet: str
     addresses: dict[str, str]
     wheelhouse: Path | None = None
+    vpn: VpnMaterial | None = None  # routers only
     templates: MachineTemplates = field(default_factory=MachineTemplates)
 
     @property

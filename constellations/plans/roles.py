@@ -1,28 +1,11 @@
-"""What each role gets beyond the common plan."""
+"""What the simulator, field computer and CloudSim server roles get beyond the common plan."""
 
 from __future__ import annotations
 
 from constellations.plans.base import PlanContext, PlanItem
 from constellations.plans.software import install_wheelhouse
-from provisioners.operations import iptables_chain, iptables_rule, sysctl
 
-FORWARD_CHAIN = "CLOUDSIM-FWD"
 SIMULATOR_VENV = "/opt/drcsim"
-
-
-def router(ctx: PlanContext) -> list[PlanItem]:
-    """Forward VPN and LAN traffic; never let the public side into the LAN."""
-    return [
-        sysctl({"net.ipv4.ip_forward": 1}, templates=ctx.templates),
-        iptables_chain(FORWARD_CHAIN),
-        iptables_rule(
-            FORWARD_CHAIN, ["-m", "conntrack", "--ctstate", "ESTABLISHED,RELATED", "-j", "ACCEPT"]
-        ),
-        iptables_rule(FORWARD_CHAIN, ["-i", "tun+", "-d", ctx.subnet, "-j", "ACCEPT"]),
-        iptables_rule(FORWARD_CHAIN, ["-s", ctx.subnet, "-j", "ACCEPT"]),
-        iptables_rule(FORWARD_CHAIN, ["-d", ctx.subnet, "-j", "DROP"]),
-        iptables_rule("FORWARD", ["-j", FORWARD_CHAIN], insert=True),
-    ]
 
 
 def simulator(ctx: PlanContext) -> list[PlanItem]:
