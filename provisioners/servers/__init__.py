@@ -1,0 +1,28 @@
+"""The `servers` provider: machines that already exist, as an apache-libcloud NodeDriver.
+
+An inventory lists the servers (address, SSH login, LAN and its CIDR). Networks are the
+inventory's pre-made LANs: ex_create_network hands out one whose servers are all free.
+create_node claims a free server of that LAN and, over SSH with the inventory's key, sets
+its hostname to the node's name and installs the node's public key; destroy_node removes
+what CloudSim put there (keys, firewall chains, /opt/drcsim, /opt/cloudsim) and frees it.
+Claims live in a JSON file under state_dir, so any later driver rediscovers them. Modules:
+driver (the libcloud API), inventory, claims (choosing servers), remote (the SSH work), state.
+"""
+
+from typing import cast
+
+from libcloud.compute.providers import DRIVERS, set_driver
+
+PROVIDER_NAME = "servers"
+DRIVER_MODULE = "provisioners.servers.driver"
+DRIVER_CLASS = "ServersNodeDriver"
+
+
+def register() -> None:
+    """Register the driver with libcloud as provider "servers" (safe to call repeatedly)."""
+    registered = cast(dict[str, tuple[str, str]], DRIVERS).get(PROVIDER_NAME)
+    if registered is None:
+        # libcloud's annotations say module/class objects; it takes (and stores) names.
+        set_driver(PROVIDER_NAME, DRIVER_MODULE, DRIVER_CLASS)  # type: ignore[arg-type]
+    elif tuple(registered) != (DRIVER_MODULE, DRIVER_CLASS):
+        raise RuntimeError(f"libcloud provider {PROVIDER_NAME!r} is already {registered!r}")

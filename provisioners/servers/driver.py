@@ -1,0 +1,430 @@
+"""ServersNodeDriver: libcloud's NodeDriver API over machines that already exist (an inventory).
+
+Creating a node claims a free server and prepares it over SSH with the inventory's login key
+(hostname, the node's authorized key); destroying one cleans the server up and frees it.
+"""
+
+from __future__ import annotations
+
+import datetime
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from libcloud.compute.base import (
+    Node,
+    NodeAuthPassword,
+    NodeAuthSSHKey,
+    NodeDriver,
+    NodeImage,
+    NodeLocation,
+    NodeSize,
+)
+from libcloud.compute.types import NodeState
+
+from provisioners.servers import remote
+from provisioners.servers.claims import (
+    check_network_name,
+    check_node_name,
+    check_tags,
+    choose_server,
+    free_lan,
+    node_state,
+)
+from provisioners.servers.errors import (
+    InvalidRequestError,
+    NetworkInUseError,
+    NetworkNotFoundError,
+    ServerSetupError,
+    ServersProviderError,
+)
+from provisioners.servers.inventory import Inventory, Server
+from provisioners.servers.state import (
+    STATUS_FAILED,
+    STATUS_PREPARING,
+    STATUS_READY,
+    NetworkClaim,
+    PendingCleanup,
+    ProcessRef,
+    ServerClaim,
+    StateFile,
+)
+from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
+
+EXISTING = "existing"
+LOCATION_ID = "servers"
+DEFAULT_CONNECT_TIMEOUT_SECONDS = 60.0
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class ServersNetwork:
+    """A pre-made LAN in use under a network name, as handed to create_node(ex_network=...)."""
+
+    id: str
+    name: str
+    cidr: str
+    driver: Any = field(repr=False, compare=False)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class _StateHostKeys:
+    """Host keys of servers: pinned in the inventory, else recorded at first contact."""
+
+    def __init__(self, state: StateFile, inventory: Inventory) -> None:
+        self._state = state
+        self._inventory = inventory
+
+    def get(self, machine_name: str) -> str | None:
+        server = self._inventory.server(machine_name)
+        if server is not None and server.host_key is not None:
+            return server.host_key
+        return self._state.read().host_keys.get(machine_name)
+
+    def put(self, machine_name: str, key_type_and_base64: str) -> None:
+        with self._state.transaction() as state:
+            state.host_keys.setdefault(machine_name, key_type_and_base64)
+
+
+class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
+    """Existing servers reached over SSH: create claims and prepares one, destroy cleans it up."""
+
+    type = "servers"
+    name = "CloudSim existing servers"
+    features = {"create_node": ["ssh_key"]}
+
+    def __init__(
+        self,
+        key: str = "servers",
+        secret: str | None = None,
+        *,
+        inventory: Inventory | Sequence[Mapping[str, Any]],
+        state_dir: str,
+        connect_timeout: float = DEFAULT_CONNECT_TIMEOUT_SECONDS,
+    ) -> None:
+        super().__init__(key=key, secret=secret)
+        if not Path(state_dir).is_absolute():
+            raise InvalidRequestError(f"state_dir must be an absolute path ({state_dir!r})")
+        self.inventory = Inventory.of(inventory)
+        self.connect_timeout = connect_timeout
+        self._state = StateFile(Path(state_dir))
+        self._host_keys = _StateHostKeys(self._state, self.inventory)
+
+    # -- networks ------------------------------------------------------------------------------
+
+    def ex_create_network(self, name: str, cidr: str | None = None) -> ServersNetwork:
+        """Take a free pre-made network (on cidr, if given) for name; return the one name has."""
+        check_network_name(name)
+        with self._state.transaction() as state:
+            existing = state.networks.get(name)
+            if existing is not None:
+                if cidr is not None and cidr != existing.cidr:
+                    raise InvalidRequestError(
+                        f"network {name!r} exists on {existing.cidr}, not {cidr}"
+                    )
+                return self._to_network(existing)
+            lan, lan_cidr = free_lan(self.inventory, state, name, cidr)
+            claim = NetworkClaim(name=name, lan=lan, cidr=lan_cidr, created_at=time.time())
+            state.networks[name] = claim
+            return self._to_network(claim)
+
+    def ex_list_networks(self) -> list[ServersNetwork]:
+        """Return the networks in use."""
+        networks = self._state.read().networks.values()
+        return [self._to_network(claim) for claim in sorted(networks, key=lambda n: n.name)]
+
+    def ex_get_network(self, name: str) -> ServersNetwork:
+        """Return the named network in use, or raise NetworkNotFoundError."""
+        claim = self._state.read().networks.get(name)
+        if claim is None:
+            raise NetworkNotFoundError(f"no network {name!r} is in use")
+        return self._to_network(claim)
+
+    def ex_destroy_network(self, network: ServersNetwork | str) -> bool:
+        """Free a network no node uses any more; True also when it was not in use."""
+        name = network if isinstance(network, str) else network.name
+        with self._state.transaction() as state:
+            nodes = sorted(c.node for c in state.claims.values() if c.network == name)
+            if nodes:
+                raise NetworkInUseError(f"network {name!r} still has nodes: {', '.join(nodes)}")
+            state.networks.pop(name, None)
+        return True
+
+    # -- nodes ---------------------------------------------------------------------------------
+
+    def create_node(
+        self,
+        name: str,
+        size: NodeSize | None = None,
+        image: NodeImage | None = None,
+        location: NodeLocation | None = None,
+        auth: NodeAuthSSHKey | NodeAuthPassword | None = None,
+        ex_network: ServersNetwork | str | None = None,
+        ex_private_ip: str | None = None,
+        ex_public: bool = False,
+        ex_tags: dict[str, str] | None = None,
+    ) -> Node:
+        """Claim a free server of ex_network and prepare it; a name already claimed is returned.
+
+        A size other than "existing" asks for a server with that capability (e.g. "gpu").
+        """
+        check_node_name(name)
+        if not isinstance(auth, NodeAuthSSHKey):
+            raise InvalidRequestError("create_node needs auth=NodeAuthSSHKey(public_key)")
+        public_key = str(auth.pubkey).strip()
+        remote.key_blob(public_key)
+        tags = check_tags(ex_tags)
+        if ex_network is None:
+            raise InvalidRequestError("create_node needs ex_network (from ex_create_network)")
+        network_name = ex_network if isinstance(ex_network, str) else ex_network.name
+        capability = size.id if size is not None and size.id != EXISTING else None
+        me = ProcessRef.current()
+        with self._state.transaction() as state:
+            network = state.networks.get(network_name)
+            if network is None:
+                raise NetworkNotFoundError(f"no network {network_name!r} is in use")
+            claim = state.claim_of_node(name)
+            stale_keys: list[str] = []
+            if claim is not None:
+                if claim.network != network_name:
+                    raise InvalidRequestError(
+                        f"node {name!r} exists in network {claim.network!r}, not {network_name!r}"
+                    )
+                if claim.status == STATUS_READY or (
+                    claim.status == STATUS_PREPARING
+                    and claim.creator.alive()
+                    and claim.creator != me
+                ):
+                    return self._to_node(claim)
+                # Preparation failed or its process died: prepare again, from this process.
+                if claim.public_key != public_key:
+                    stale_keys.append(claim.public_key)
+                claim.status, claim.error, claim.creator = STATUS_PREPARING, None, me
+                claim.public_key, claim.tags = public_key, tags
+            else:
+                server = choose_server(
+                    self.inventory,
+                    state,
+                    network,
+                    private_ip=ex_private_ip,
+                    public=bool(ex_public),
+                    capability=capability,
+                )
+                claim = ServerClaim(
+                    server=server.name,
+                    node=name,
+                    network=network_name,
+                    private_ip=server.private_ip,
+                    public_ip=server.public_ip,
+                    public_key=public_key,
+                    tags=tags,
+                    size=size.id if size is not None else EXISTING,
+                    status=STATUS_PREPARING,
+                    created_at=time.time(),
+                    creator=me,
+                )
+                state.claims[server.name] = claim
+            pending = state.pending_cleanups.get(claim.server)
+        server = self._server(claim.server)
+        try:
+            with self._executor(server) as executor:
+                if pending is not None:
+                    log.info("server %s: cleaning up after an earlier node first", server.name)
+                    remote.clean_up(executor, server, pending.public_keys)
+                remote.prepare(executor, server, name, public_key, stale_keys)
+        except SSHError as error:
+            self._mark_failed(server.name, name, str(error))
+            raise ServerSetupError(
+                f"server {server.name} (claimed for node {name}) could not be prepared: {error}"
+            ) from error
+        with self._state.transaction() as state:
+            current = state.claims.get(server.name)
+            if current is None or current.node != name:
+                raise ServersProviderError(f"node {name!r} was destroyed while being prepared")
+            current.status = STATUS_READY
+            state.pending_cleanups.pop(server.name, None)
+            return self._to_node(current)
+
+    def destroy_node(self, node: Node) -> bool:
+        """Clean the node's server up and free it; True also when it is not claimed.
+
+        A server that cannot be cleaned up (unreachable, a command failed) is freed all the
+        same, so that terminating a constellation finishes, with a warning recorded in the
+        state: its cleanup runs again before the server is next claimed, which fails while
+        the server stays unreachable.
+        """
+        claim = self._state.read().claim_of_node(node.name)
+        if claim is None or (node.id and str(node.id) != claim.server):
+            return True
+        pending = self._state.read().pending_cleanups.get(claim.server)
+        keys = sorted({claim.public_key, *(pending.public_keys if pending else [])})
+        warning = None
+        server = self.inventory.server(claim.server)
+        if server is None:
+            warning = f"server {claim.server} is no longer in the inventory; not cleaned up"
+        else:
+            try:
+                with self._executor(server) as executor:
+                    remote.clean_up(executor, server, keys)
+            except SSHError as error:
+                warning = f"server {server.name} was released without cleanup: {error}"
+        if warning is not None:
+            log.warning("%s (node %s)", warning, node.name)
+        with self._state.transaction() as state:
+            current = state.claims.get(claim.server)
+            if current is not None and current.node == node.name:
+                del state.claims[claim.server]
+            if warning is None:
+                state.pending_cleanups.pop(claim.server, None)
+            else:
+                state.pending_cleanups[claim.server] = PendingCleanup(
+                    server=claim.server, public_keys=keys, warning=warning, since=time.time()
+                )
+        return True
+
+    def list_nodes(self) -> list[Node]:
+        """Return a node per claimed server, rediscovered from state_dir."""
+        claims = self._state.read().claims.values()
+        return [self._to_node(claim) for claim in sorted(claims, key=lambda c: c.node)]
+
+    def ex_list_nodes_by_tags(self, tags: Mapping[str, str]) -> list[Node]:
+        """Return the nodes carrying every one of tags (all nodes for no tags)."""
+        return [
+            node
+            for node in self.list_nodes()
+            if all(node.extra["tags"].get(key) == value for key, value in tags.items())
+        ]
+
+    def ex_list_servers(self) -> list[dict[str, Any]]:
+        """Return every inventory server with its status (free or claimed), never its key."""
+        state = self._state.read()
+        servers = []
+        for server in self.inventory.servers:
+            claim = state.claims.get(server.name)
+            pending = state.pending_cleanups.get(server.name)
+            servers.append(
+                {
+                    "name": server.name,
+                    "address": server.address,
+                    "private_ip": server.private_ip,
+                    "public_ip": server.public_ip,
+                    "network": server.network,
+                    "cidr": server.cidr,
+                    "user": server.user,
+                    "capabilities": sorted(server.capabilities),
+                    "status": "free" if claim is None else "claimed",
+                    "node": claim.node if claim else None,
+                    "node_state": node_state(claim).value if claim else None,
+                    "tags": dict(claim.tags) if claim else {},
+                    "warning": pending.warning if pending else None,
+                }
+            )
+        return servers
+
+    def wait_until_running(
+        self,
+        nodes: list[Node],
+        wait_period: float = 0.5,
+        timeout: float = 600,
+        ssh_interface: str = "private_ips",
+        force_ipv4: bool = True,
+        ex_list_nodes_kwargs: dict[str, Any] | None = None,
+    ) -> list[tuple[Node, list[str]]]:
+        """Wait until every node is prepared; fail at once for one that never will be."""
+        if ssh_interface not in ("public_ips", "private_ips"):
+            raise InvalidRequestError("ssh_interface must be public_ips or private_ips")
+        deadline = time.monotonic() + timeout
+        while True:
+            current = {node.name: node for node in self.list_nodes()}
+            now = [current.get(node.name) for node in nodes]
+            hopeless = [
+                f"{node.name} ({'gone' if found is None else found.state})"
+                for node, found in zip(nodes, now, strict=True)
+                if found is None or found.state not in (NodeState.RUNNING, NodeState.PENDING)
+            ]
+            if hopeless:
+                raise ServersProviderError(f"nodes that will not run: {', '.join(hopeless)}")
+            ready = [found for found in now if found is not None]
+            if all(found.state == NodeState.RUNNING for found in ready):
+                return [(found, list(getattr(found, ssh_interface))) for found in ready]
+            if time.monotonic() >= deadline:
+                raise ServersProviderError(f"nodes still being prepared after {timeout:.0f} s")
+            time.sleep(wait_period)
+
+    def list_sizes(self, location: NodeLocation | None = None) -> list[NodeSize]:
+        """Return the single size: whatever the server has."""
+        return [NodeSize(EXISTING, EXISTING, ram=0, disk=0, bandwidth=None, price=0.0, driver=self)]
+
+    def list_images(self, location: NodeLocation | None = None) -> list[NodeImage]:
+        """Return the single image: the system already on the server."""
+        return [NodeImage(id=EXISTING, name=EXISTING, driver=self)]
+
+    def list_locations(self) -> list[NodeLocation]:
+        """Return the single location: wherever the inventory's servers are."""
+        return [NodeLocation(id=LOCATION_ID, name=LOCATION_ID, country="", driver=self)]
+
+    # -- internals -----------------------------------------------------------------------------
+
+    def _server(self, name: str) -> Server:
+        server = self.inventory.server(name)
+        if server is None:
+            raise ServersProviderError(f"server {name!r} is claimed but not in the inventory")
+        return server
+
+    def _executor(self, server: Server) -> SSHExecutor:
+        return SSHExecutor(
+            self._host_keys,
+            log_sink=_log_line,
+            secrets=[server.private_key],
+            connect_policy=ConnectPolicy(
+                deadline=self.connect_timeout, attempt_timeout=min(10.0, self.connect_timeout)
+            ),
+        )
+
+    def _mark_failed(self, server_name: str, node_name: str, error: str) -> None:
+        with self._state.transaction() as state:
+            claim = state.claims.get(server_name)
+            if claim is not None and claim.node == node_name:
+                claim.status, claim.error = STATUS_FAILED, error
+
+    def _to_network(self, claim: NetworkClaim) -> ServersNetwork:
+        return ServersNetwork(
+            id=claim.name,
+            name=claim.name,
+            cidr=claim.cidr,
+            driver=self,
+            extra={"lan": claim.lan, "created_at": claim.created_at},
+        )
+
+    def _to_node(self, claim: ServerClaim) -> Node:
+        server = self.inventory.server(claim.server)
+        extra: dict[str, Any] = {
+            "server": claim.server,
+            "network": claim.network,
+            "tags": dict(claim.tags),
+            "status": claim.status,
+            "error": claim.error,
+            "ssh_user": server.user if server else None,
+            "capabilities": sorted(server.capabilities) if server else [],
+        }
+        if server is not None and server.proxy_command:
+            extra["ssh_proxy_command"] = list(server.proxy_command)
+        return Node(
+            id=claim.server,
+            name=claim.node,
+            state=node_state(claim),
+            public_ips=[claim.public_ip] if claim.public_ip else [],
+            private_ips=[claim.private_ip],
+            driver=self,
+            size=self.list_sizes()[0],
+            image=self.list_images()[0],
+            created_at=datetime.datetime.fromtimestamp(claim.created_at, tz=datetime.UTC),
+            extra=extra,
+        )
+
+
+def _log_line(machine_name: str, line: str) -> None:
+    log.debug("%s: %s", machine_name, line)

@@ -1,0 +1,156 @@
+"""What the provider does on a server over SSH: prepare it for a node, clean up after one."""
+
+from __future__ import annotations
+
+import itertools
+import shlex
+from collections.abc import Iterable, Sequence
+
+from provisioners.facts.iptables import iptables_prefix
+from provisioners.operations.sysctl import DEFAULT_PERSIST_PATH
+from provisioners.servers.errors import InvalidRequestError
+from provisioners.servers.inventory import Server
+from provisioners.ssh import Machine, SSHExecutor
+
+# What CloudSim's deploy plans put on a machine (constellations/plans: common, router, roles,
+# software); tests check these lists against the plans' own constants.
+CLOUDSIM_CHAINS = ("CLOUDSIM-IN", "CLOUDSIM-FWD")
+CLOUDSIM_PATHS = ("/opt/drcsim", "/opt/cloudsim", DEFAULT_PERSIST_PATH)
+COMMAND_TIMEOUT_SECONDS = 60.0
+_JUMP_OPTIONS = ("-j", "--jump", "-g", "--goto")
+_KEY_TYPES = ("ssh-", "ecdsa-", "sk-")
+
+# Sets $keys to the login user's authorized_keys; every script starts with it.
+_FIND_KEYS = """set -eu
+user={user}
+home=$(getent passwd "$user" | cut -d: -f6)
+if [ -z "$home" ]; then echo "no home directory for user $user" >&2; exit 3; fi
+keys="$home/.ssh/authorized_keys"
+"""
+# Drops every line holding one of the blobs (a key's base64), keeping owner and mode.
+_REMOVE_KEYS = """if [ -f "$keys" ]; then
+  tmp="$keys.cloudsim-$$"
+  cp -p "$keys" "$tmp"
+  awk -v blobs={blobs} 'BEGIN {{ n = split(blobs, b, " "); for (i = 1; i <= n; i++) drop[b[i]] }}
+    {{ for (i = 1; i <= NF; i++) if ($i in drop) next; print }}' "$keys" > "$tmp"
+  mv -f "$tmp" "$keys"
+fi
+"""
+_ADD_KEY = """group=$(id -gn "$user")
+if [ ! -d "$home/.ssh" ]; then install -d -m 700 -o "$user" -g "$group" "$home/.ssh"; fi
+if [ ! -f "$keys" ]; then install -m 600 -o "$user" -g "$group" /dev/null "$keys"; fi
+if ! awk -v blob={blob} '{{ for (i = 1; i <= NF; i++) if ($i == blob) found = 1 }}
+    END {{ exit !found }}' "$keys"; then
+  if [ -s "$keys" ] && [ -n "$(tail -c 1 "$keys")" ]; then echo >> "$keys"; fi
+  printf '%s\\n' {line} >> "$keys"
+fi
+"""
+_SET_HOSTNAME = """printf '%s\\n' {hostname} > /etc/hostname
+hostname {hostname}
+"""
+_LIST_FILTER_RULES = f"""if command -v iptables > /dev/null 2>&1; then
+  {iptables_prefix("filter", False)} -S
+fi
+"""
+
+
+def target(server: Server) -> Machine:
+    """Return how the controller logs in to a server with the inventory's credentials."""
+    return Machine(
+        name=server.name,
+        host=server.address,
+        port=server.port,
+        user=server.user,
+        private_key=server.private_key,
+        proxy_command=list(server.proxy_command) if server.proxy_command else None,
+    )
+
+
+def key_blob(public_key: str) -> str:
+    """Return the base64 part of one OpenSSH public key line, refusing anything else."""
+    words = public_key.strip().split()
+    if "\n" in public_key.strip() or len(words) < 2 or not words[0].startswith(_KEY_TYPES):
+        raise InvalidRequestError("auth must hold one OpenSSH public key line")
+    return words[1]
+
+
+def prepare_script(
+    server: Server, hostname: str, public_key: str, stale_keys: Sequence[str]
+) -> str:
+    """Return the script that removes stale keys, installs public_key and sets the hostname."""
+    script = _FIND_KEYS.format(user=shlex.quote(server.user))
+    stale = _removable_blobs(server, stale_keys)
+    if stale:
+        script += _REMOVE_KEYS.format(blobs=shlex.quote(" ".join(stale)))
+    blob = key_blob(public_key)
+    if blob != server.login_key_blob:  # the login key is there already and must stay
+        script += _ADD_KEY.format(blob=shlex.quote(blob), line=shlex.quote(public_key.strip()))
+    return script + _SET_HOSTNAME.format(hostname=shlex.quote(hostname))
+
+
+def cleanup_script(server: Server, public_keys: Sequence[str], filter_rules: str) -> str:
+    """Return the script that removes CloudSim's keys, firewall chains and files, and renames."""
+    script = _FIND_KEYS.format(user=shlex.quote(server.user))
+    blobs = _removable_blobs(server, public_keys)
+    if blobs:
+        script += _REMOVE_KEYS.format(blobs=shlex.quote(" ".join(blobs)))
+    script += "".join(f"{command}\n" for command in iptables_cleanup(filter_rules))
+    script += f"rm -rf -- {shlex.join(CLOUDSIM_PATHS)}\n"
+    return script + _SET_HOSTNAME.format(hostname=shlex.quote(server.name))
+
+
+def iptables_cleanup(filter_rules: str) -> list[str]:
+    """Return the commands deleting CloudSim's chains and every jump to them, from `iptables -S`."""
+    prefix = iptables_prefix("filter", False)
+    jumps: list[str] = []
+    chains: list[str] = []
+    for line in filter_rules.splitlines():
+        words = shlex.split(line)
+        if len(words) == 2 and words[0] == "-N" and words[1] in CLOUDSIM_CHAINS:
+            chains.append(words[1])
+        elif len(words) > 2 and words[0] == "-A" and words[1] not in CLOUDSIM_CHAINS:
+            if _jump_target(words[2:]) in CLOUDSIM_CHAINS:
+                jumps.append(f"{prefix} -D {shlex.join(words[1:])}")
+    # A chain can only go once nothing jumps to it, and only when empty.
+    return [
+        *jumps,
+        *(f"{prefix} -F {shlex.quote(chain)}" for chain in chains),
+        *(f"{prefix} -X {shlex.quote(chain)}" for chain in chains),
+    ]
+
+
+def prepare(
+    executor: SSHExecutor,
+    server: Server,
+    hostname: str,
+    public_key: str,
+    stale_keys: Sequence[str] = (),
+) -> None:
+    """Install the node's key for the login user and give the server the node's hostname."""
+    run(executor, server, prepare_script(server, hostname, public_key, stale_keys))
+
+
+def clean_up(executor: SSHExecutor, server: Server, public_keys: Sequence[str]) -> None:
+    """Remove what CloudSim put on the server and give it back its own hostname."""
+    filter_rules = run(executor, server, _LIST_FILTER_RULES)
+    run(executor, server, cleanup_script(server, public_keys, filter_rules))
+
+
+def run(executor: SSHExecutor, server: Server, script: str) -> str:
+    """Run a script as root (through sudo for another login user); return its stdout."""
+    result = executor.run(
+        target(server), script, sudo=server.user != "root", timeout=COMMAND_TIMEOUT_SECONDS
+    )
+    return result.stdout
+
+
+def _removable_blobs(server: Server, public_keys: Iterable[str]) -> list[str]:
+    blobs = {key_blob(key) for key in public_keys} - {server.login_key_blob}
+    return sorted(blobs)
+
+
+def _jump_target(rule: Sequence[str]) -> str | None:
+    for option, value in itertools.pairwise(rule):
+        if option in _JUMP_OPTIONS:
+            return value
+    return None
