@@ -89,6 +89,7 @@ mount -t overlay "$machine" \
 # PID 1 of fresh mount/UTS/IPC/PID namespaces, already inside the host's network namespace.
 _MINIMAL_INIT = (
     "set -euo pipefail\n"
+    + "DROPPED_CAPABILITIES=-mknod,-dac_read_search,-sys_module,-sys_rawio,-sys_time,-sys_boot\n"
     + _FIRST_BOOT
     + _DETACH_OTHER_NETNS
     + "host_dir=$1 hostname=$2 machine=$3 machine_id=$4 authorized_keys=$5\n"
@@ -97,13 +98,38 @@ _MINIMAL_INIT = (
 detach_other_netns ""
 first_boot "$root" "$hostname" "$machine_id" "$authorized_keys"
 mount -t proc proc "$root/proc"
-mount -t sysfs sysfs "$root/sys"
-mount --rbind /dev "$root/dev"
+# Like nspawn: kernel tunables read-only, only this host's network ones (ip_forward) writable.
+mount --bind "$root/proc/sys" "$root/proc/sys"
+mount -o remount,bind,ro "$root/proc/sys"
+mount --bind /proc/sys/net "$root/proc/sys/net"
+mount -t sysfs -o ro sysfs "$root/sys"
+# A /dev of its own: the machine's disks must not be reachable from inside.
+mount -t tmpfs -o mode=755,nosuid tmpfs "$root/dev"
+for node in null:1:3 zero:1:5 full:1:7 random:1:8 urandom:1:9 tty:5:0; do
+  IFS=: read -r name major minor <<< "$node"
+  mknod -m 666 "$root/dev/$name" c "$major" "$minor"
+done
+install -d -m 755 "$root/dev/net" "$root/dev/pts" "$root/dev/shm"
+mknod -m 600 "$root/dev/net/tun" c 10 200
+mount -t devpts -o newinstance,ptmxmode=0666,mode=0620,gid=5 devpts "$root/dev/pts"
+ln -s pts/ptmx "$root/dev/ptmx"
+mount -t tmpfs -o mode=1777,nosuid,nodev tmpfs "$root/dev/shm"
+ln -s /proc/self/fd "$root/dev/fd"
+ln -s /proc/self/fd/0 "$root/dev/stdin"
+ln -s /proc/self/fd/1 "$root/dev/stdout"
+ln -s /proc/self/fd/2 "$root/dev/stderr"
 mount -t tmpfs -o mode=755 tmpfs "$root/run"
 mount -t tmpfs -o mode=1777 tmpfs "$root/tmp"
 install -d -m 755 "$root/run/sshd"
 hostname "$hostname"
-exec chroot "$root" /usr/bin/tini -s -- /usr/sbin/sshd -D -e
+# pivot_root, not chroot: root inside could simply chroot back out of a chroot.
+install -d -m 700 "$root/run/old-root"
+cd "$root"
+pivot_root . run/old-root
+cd /
+umount --lazy /run/old-root
+rmdir /run/old-root
+exec setpriv --bounding-set "$DROPPED_CAPABILITIES" -- /usr/bin/tini -s -- /usr/sbin/sshd -D -e
 """
 )
 
@@ -131,7 +157,8 @@ tun=()
 if [ -c /dev/net/tun ]; then tun=(--bind=/dev/net/tun); fi
 exec systemd-nspawn --quiet --directory="$root" --boot --machine="$machine" \
   --hostname="$hostname" --register=no --keep-unit --console=passive \
-  --capability=CAP_NET_ADMIN "${tun[@]}" --network-namespace-path="/run/netns/$netns"
+  --capability=CAP_NET_ADMIN --drop-capability=CAP_MKNOD,CAP_DAC_READ_SEARCH "${tun[@]}" \
+  --network-namespace-path="/run/netns/$netns"
 """
 )
 

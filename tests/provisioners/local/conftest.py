@@ -22,6 +22,14 @@ from local_support import IS_ROOT, HostShell, SshKey, destroy_everything, open_s
 from provisioners.local.driver import LocalNodeDriver
 
 
+@pytest.fixture
+def scratch() -> Iterator[Path]:
+    """Give a test an empty directory, removed afterwards (pytest's tmp_path keeps 3 runs)."""
+    directory = Path(tempfile.mkdtemp(prefix="cloudsim-local-test-"))
+    yield directory
+    shutil.rmtree(directory)
+
+
 @pytest.fixture(scope="session")
 def ssh_key() -> SshKey:
     """Generate an ed25519 key pair for this test session."""

@@ -143,6 +143,20 @@ def test_hosts_can_forward_and_open_tun(lan: Lan, ssh_key: SshKey, shells: Shell
     assert Path("/proc/sys/net/ipv4/ip_forward").read_text().strip() in ("0", "1")
 
 
+def test_hosts_cannot_touch_the_machines_disks_or_kernel_tunables(
+    lan: Lan, ssh_key: SshKey, shells: Shells
+) -> None:
+    swappiness = Path("/proc/sys/vm/swappiness").read_text()
+    for node in (lan.router, lan.sim):
+        shell = shells(node, ssh_key)
+        assert shell.check("find /dev -type b | wc -l").strip() == "0"
+        assert shell.run("mknod /tmp/disk b 254 0")[0] != 0
+        assert shell.run("sysctl -w vm.swappiness=7")[0] != 0
+        # Only this host's mounts: nothing of the machine's own mount table shows through.
+        assert "/run/netns" not in shell.check("cat /proc/1/mountinfo")
+    assert Path("/proc/sys/vm/swappiness").read_text() == swappiness
+
+
 def test_lan_hosts_reach_each_other(lan: Lan, ssh_key: SshKey, shells: Shells) -> None:
     router, sim = shells(lan.router, ssh_key), shells(lan.sim, ssh_key)
     sim.check(f"ping -c 1 -W 2 {lan.router.private_ips[0]}")

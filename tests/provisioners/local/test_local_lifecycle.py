@@ -338,10 +338,10 @@ def test_register_makes_the_driver_available_by_name() -> None:
     assert get_driver("local") is LocalNodeDriver
 
 
-def test_a_non_root_caller_is_told_that_root_is_needed(tmp_path: Path) -> None:
+def test_a_non_root_caller_is_told_that_root_is_needed(scratch: Path) -> None:
     script = (
         "from provisioners.local.driver import LocalNodeDriver\n"
-        f"LocalNodeDriver(state_dir={str(tmp_path)!r}).list_nodes()\n"
+        f"LocalNodeDriver(state_dir={str(scratch)!r}).list_nodes()\n"
     )
     result = subprocess.run(
         [
@@ -361,4 +361,4 @@ def test_a_non_root_caller_is_told_that_root_is_needed(tmp_path: Path) -> None:
     )
     assert result.returncode != 0
     assert "NotRootError: the local provider needs root (running as uid 65534)" in result.stderr
-    assert list(tmp_path.iterdir()) == []
+    assert list(scratch.iterdir()) == []

@@ -31,28 +31,28 @@ def _node(name: str) -> NodeRecord:
     )
 
 
-def test_node_records_round_trip_through_json(tmp_path: Path) -> None:
-    store = StateStore(tmp_path, "cs")
+def test_node_records_round_trip_through_json(scratch: Path) -> None:
+    store = StateStore(scratch, "cs")
     store.write_node(_node("sim"))
-    again = StateStore(tmp_path, "cs").find_node("sim")
+    again = StateStore(scratch, "cs").find_node("sim")
     assert again == _node("sim")
     assert again is not None and again.init_process == ProcessId(11, 21)
     assert [record.name for record in store.read_nodes()] == ["sim"]
 
 
-def test_deleting_a_node_removes_its_directory(tmp_path: Path) -> None:
-    store = StateStore(tmp_path, "cs")
+def test_deleting_a_node_removes_its_directory(scratch: Path) -> None:
+    store = StateStore(scratch, "cs")
     store.write_node(_node("sim"))
     (store.node_dir("sim") / "boot.log").write_text("booted\n")
     store.delete_node("sim")
     store.delete_node("sim")
     assert store.find_node("sim") is None
     store.remove_empty_dirs()
-    assert list(tmp_path.iterdir()) == []
+    assert list(scratch.iterdir()) == []
 
 
-def test_prefixes_see_their_own_records_but_share_subnet_knowledge(tmp_path: Path) -> None:
-    first, second = StateStore(tmp_path, "csa"), StateStore(tmp_path, "csb")
+def test_prefixes_see_their_own_records_but_share_subnet_knowledge(scratch: Path) -> None:
+    first, second = StateStore(scratch, "csa"), StateStore(scratch, "csb")
     first.write_network(NetworkRecord("lan", "10.211.0.0/24", "csa-s-lan"))
     second.write_network(NetworkRecord("lan", "10.211.1.0/24", "csb-s-lan"))
     assert [record.cidr for record in first.read_networks()] == ["10.211.0.0/24"]
@@ -62,19 +62,19 @@ def test_prefixes_see_their_own_records_but_share_subnet_knowledge(tmp_path: Pat
     ]
 
 
-def test_the_lock_excludes_other_holders_until_released(tmp_path: Path) -> None:
-    store = StateStore(tmp_path, "cs")
-    with store.lock(), open(tmp_path / ".lock") as other:
+def test_the_lock_excludes_other_holders_until_released(scratch: Path) -> None:
+    store = StateStore(scratch, "cs")
+    with store.lock(), open(scratch / ".lock") as other:
         with pytest.raises(BlockingIOError):
             fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    with open(tmp_path / ".lock") as other:
+    with open(scratch / ".lock") as other:
         fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
         fcntl.flock(other, fcntl.LOCK_UN)
 
 
-def test_the_lock_serialises_threads(tmp_path: Path) -> None:
-    store = StateStore(tmp_path, "cs")
-    counter_file = tmp_path / "counter"
+def test_the_lock_serialises_threads(scratch: Path) -> None:
+    store = StateStore(scratch, "cs")
+    counter_file = scratch / "counter"
     counter_file.write_text("0")
 
     def increment() -> None:
@@ -104,15 +104,15 @@ def test_an_exited_process_is_not_alive() -> None:
     assert processes.identify(child.pid) is None
 
 
-def test_units_enabled_on_the_base_image_are_masked_except_ssh(tmp_path: Path) -> None:
-    wants = tmp_path / "multi-user.target.wants"
+def test_units_enabled_on_the_base_image_are_masked_except_ssh(scratch: Path) -> None:
+    wants = scratch / "multi-user.target.wants"
     wants.mkdir()
     for unit in ("postgresql.service", "redis-server.service", "ssh.service", "remote-fs.target"):
         (wants / unit).symlink_to(f"/lib/systemd/system/{unit}")
-    timers = tmp_path / "timers.target.wants"
+    timers = scratch / "timers.target.wants"
     timers.mkdir()
     (timers / "apt-daily.timer").symlink_to("/lib/systemd/system/apt-daily.timer")
-    assert units_to_mask(tmp_path) == [
+    assert units_to_mask(scratch) == [
         "apt-daily.timer",
         "console-getty.service",
         "postgresql.service",
@@ -127,25 +127,25 @@ def test_this_machines_enabled_services_would_be_masked_but_not_sshd() -> None:
         assert "postgresql.service" in masked
 
 
-def test_host_cgroups_sit_below_our_own_in_the_systemd_hierarchies(tmp_path: Path) -> None:
-    (tmp_path / "cgroup").write_text(
+def test_host_cgroups_sit_below_our_own_in_the_systemd_hierarchies(scratch: Path) -> None:
+    (scratch / "cgroup").write_text(
         "9:name=systemd:/worker.service\n4:memory:/box\n0::/worker.service\n"
     )
-    (tmp_path / "mountinfo").write_text(
+    (scratch / "mountinfo").write_text(
         "31 23 0:28 / /sys/fs/cgroup rw,relatime - tmpfs tmpfs rw,mode=755\n"
         "35 31 0:32 / /sys/fs/cgroup/memory rw,relatime - cgroup cgroup rw,memory\n"
         "40 31 0:37 / /sys/fs/cgroup/systemd rw,relatime - cgroup cgroup rw,name=systemd\n"
         "41 31 0:38 / /sys/fs/cgroup/unified rw,relatime - cgroup2 cgroup2 rw\n"
     )
-    assert host_cgroup_dirs("cs-router", proc=tmp_path) == (
+    assert host_cgroup_dirs("cs-router", proc=scratch) == (
         Path("/sys/fs/cgroup/systemd/worker.service/cs-router"),
         Path("/sys/fs/cgroup/unified/worker.service/cs-router"),
     )
 
 
-def test_host_cgroups_on_a_pure_cgroup2_machine(tmp_path: Path) -> None:
-    (tmp_path / "cgroup").write_text("0::/\n")
-    (tmp_path / "mountinfo").write_text(
+def test_host_cgroups_on_a_pure_cgroup2_machine(scratch: Path) -> None:
+    (scratch / "cgroup").write_text("0::/\n")
+    (scratch / "mountinfo").write_text(
         "30 23 0:26 / /sys/fs/cgroup rw,nosuid - cgroup2 cgroup2 rw,nsdelegate\n"
     )
-    assert host_cgroup_dirs("cs-sim", proc=tmp_path) == (Path("/sys/fs/cgroup/cs-sim"),)
+    assert host_cgroup_dirs("cs-sim", proc=scratch) == (Path("/sys/fs/cgroup/cs-sim"),)
