@@ -25,6 +25,7 @@ from provisioners.local.errors import InvalidRequestError, LocalProviderError, N
 from provisioners.local.network import LocalNetwork, NetworkManager
 from provisioners.local.nodes import NodeManager, NodeRequest, node_state
 from provisioners.local.state import NetworkRecord, NodeRecord, StateStore
+from provisioners.local.sweep import sweep_prefix
 
 SIZE_ID = "host"
 IMAGE_ID = "debian-12"
@@ -235,6 +236,22 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
             if time.monotonic() >= deadline:
                 raise LocalProviderError(f"nodes still pending after {timeout:.0f} s")
             time.sleep(wait_period)
+
+    @requires_root
+    def ex_sweep(self) -> list[str]:
+        """Destroy every node and network of this prefix, then what is left without a record.
+
+        Returns what the second step found (namespaces, cgroups, mounts whose records were
+        lost, e.g. with a deleted state_dir): an empty list means nothing had leaked.
+        """
+        for node in self.list_nodes():
+            self.destroy_node(node)
+        for network in self.ex_list_networks():
+            self.ex_destroy_network(network)
+        leaked = sweep_prefix(self.prefix)
+        with self._store.lock():
+            self._store.remove_empty_dirs()
+        return leaked
 
     @requires_root
     def list_sizes(self, location: NodeLocation | None = None) -> list[NodeSize]:

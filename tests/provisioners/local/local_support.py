@@ -2,7 +2,6 @@
 
 import os
 import shlex
-import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -11,7 +10,6 @@ import pytest
 from libcloud.compute.base import Node, NodeAuthSSHKey
 
 from provisioners.local.driver import LocalNodeDriver
-from provisioners.local.netns import list_namespaces
 
 IS_ROOT = os.geteuid() == 0
 needs_root = pytest.mark.skipif(not IS_ROOT, reason="local hosts need root")
@@ -123,26 +121,10 @@ def open_shell(node: Node, key: SshKey) -> HostShell:
 
 
 def destroy_everything(state_dir: Path, prefix: str) -> list[str]:
-    """Destroy every node and network of prefix; force-remove and report anything left over."""
-    driver = LocalNodeDriver(state_dir=str(state_dir), prefix=prefix)
-    for node in driver.list_nodes():
-        driver.destroy_node(node)
-    for network in driver.ex_list_networks():
-        driver.ex_destroy_network(network)
-    leftovers: list[str] = []
-    for namespace in list_namespaces(f"{prefix}-"):
-        leftovers.append(f"netns {namespace}")
-        subprocess.run(["ip", "netns", "delete", namespace], check=True)
-    for mount_point in mounts_under(state_dir):
-        leftovers.append(f"mount {mount_point}")
-        subprocess.run(["umount", "--lazy", mount_point], check=True)
-    for cgroup in sorted(Path("/sys/fs/cgroup").glob(f"*/{prefix}-*")):
-        leftovers.append(f"cgroup {cgroup}")
-        for directory in sorted(cgroup.glob("**/"), key=lambda path: len(path.parts), reverse=True):
-            directory.rmdir()
-    for path in sorted(state_dir.rglob("*")):
-        if path.name != ".lock":
-            leftovers.append(f"file {path}")
+    """Destroy every node and network of prefix; report whatever had leaked past its records."""
+    leftovers = LocalNodeDriver(state_dir=str(state_dir), prefix=prefix).ex_sweep()
+    leftovers += [f"mount {point}" for point in mounts_under(state_dir)]
+    leftovers += [f"file {path}" for path in sorted(state_dir.rglob("*")) if path.name != ".lock"]
     return leftovers
 
 

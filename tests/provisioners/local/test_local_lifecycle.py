@@ -1,5 +1,6 @@
 """Destroy leaves nothing behind, failures clean up, networks stay apart, reboot keeps state."""
 
+import shutil
 import subprocess
 import sys
 import threading
@@ -324,6 +325,34 @@ def test_a_node_whose_creator_was_killed_is_error_and_destroyed_cleanly(
             creator.kill()
             creator.wait()
         driver.ex_destroy_network(network)
+
+
+def test_sweep_removes_hosts_whose_records_were_lost(
+    driver: LocalNodeDriver, ssh_key: SshKey, state_dir: Path, host_prefix: str
+) -> None:
+    network = driver.ex_create_network("lost")
+    nodes = [
+        _create(driver, "lost-boot", network, ssh_key, ex_public=True, ex_init="systemd"),
+        _create(driver, "lost-tini", network, ssh_key, ex_init="minimal"),
+    ]
+    recorded = [process for node in nodes for process in _recorded_processes(node)]
+    # What a wiped state_dir looks like: hosts still running, nothing on record.
+    shutil.rmtree(state_dir / host_prefix / "nodes")
+    shutil.rmtree(state_dir / host_prefix / "networks")
+    assert driver.list_nodes() == []
+
+    leaked = driver.ex_sweep()
+
+    assert f"netns {host_prefix}-h-lost-boot" in leaked
+    assert f"netns {host_prefix}-s-lost" in leaked
+    assert any(item.startswith("cgroup ") and "lost-boot" in item for item in leaked)
+    assert any(item.startswith("mount ") for item in leaked)
+    assert not any(processes.is_alive(process) for process in recorded)
+    assert list_namespaces(f"{host_prefix}-") == []
+    assert not any(path.exists() for path in host_cgroup_dirs(f"{host_prefix}-lost-boot"))
+    assert mounts_under(state_dir) == []
+    assert [path.name for path in state_dir.iterdir()] == [".lock"]
+    assert driver.ex_sweep() == []
 
 
 def test_catalogue_has_one_size_image_and_location(driver: LocalNodeDriver) -> None:
