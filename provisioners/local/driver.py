@@ -21,7 +21,12 @@ from libcloud.compute.types import NodeState
 
 from provisioners.local import host, netns
 from provisioners.local.addresses import check_name, check_prefix, parse_address, parse_subnet
-from provisioners.local.errors import InvalidRequestError, LocalProviderError, NotRootError
+from provisioners.local.errors import (
+    InvalidRequestError,
+    LocalProviderError,
+    NetworkNotFoundError,
+    NotRootError,
+)
 from provisioners.local.network import LocalNetwork, NetworkManager
 from provisioners.local.nodes import NodeManager, NodeRequest, node_state
 from provisioners.local.state import NetworkRecord, NodeRecord, StateStore
@@ -135,6 +140,10 @@ class LocalNodeDriver(NodeDriver):  # type: ignore[misc]
     @requires_root
     def ex_public_proxy_command(self, ip: str, port: int) -> list[str]:
         """Return an argv connecting stdio to ip:port from "the internet" (the public network)."""
+        if not netns.namespace_exists(self._networks.public_switch_netns):
+            raise NetworkNotFoundError(
+                "there is no public network: no node of this prefix has ex_public=True"
+            )
         return netns.connect_command(
             self._networks.public_switch_netns, str(parse_address(ip)), port
         )

@@ -85,6 +85,8 @@ def test_destroy_removes_every_namespace_mount_process_and_file(
     assert driver.ex_destroy_network(network) is True
     assert driver.ex_destroy_network(network) is True
     assert list_namespaces(f"{host_prefix}-") == []
+    with pytest.raises(NetworkNotFoundError, match="no public network"):
+        driver.ex_public_proxy_command("198.18.0.2", 22)
     assert [path.name for path in state_dir.iterdir()] == [".lock"]
 
 
