@@ -65,6 +65,12 @@ class Grasps:
             # Hands pass through the hose so that closing on it never knocks it away.
             hands = [n for n in scene.robot_links if n[2:] in ("hand", "finger", "larm", "ufarm")]
             self._ignore_collisions(scene.hose, [scene.robot_links[n] for n in hands])
+            if scene.standpipe is not None:
+                # The coupler slides onto the inlet; the coupling assist makes the joint.
+                for hose_link in range(-1, self.client.getNumJoints(scene.hose)):
+                    self.client.setCollisionFilterPair(
+                        scene.hose, scene.standpipe, hose_link, -1, 0
+                    )
 
     def _ignore_collisions(self, body: int, robot_links: list[int]) -> None:
         for robot_link in robot_links:

@@ -21,7 +21,7 @@ POSITION_TOLERANCE = 0.04
 YAW_TOLERANCE = 0.04
 MAX_LEAD = 0.15  # how far the harness may lead the pelvis before walking waits
 REACH_EVERY = 20  # physics steps between task-space IK updates (50 Hz)
-REACH_GAIN = 0.5
+REACH_GAIN = 0.3
 REACH_TOLERANCE = 0.02
 LEG_JOINTS = [s.name for s in humanoid.BODY_JOINTS if "_leg_" in s.name]
 TRUNK_JOINTS = ["back_bkz", "back_bky", "back_bkx", "neck_ry"]
@@ -68,7 +68,7 @@ class Reach:
     def point(self) -> np.ndarray:
         """Return the world position of the point being moved."""
         client = self.scene.client
-        state = client.getLinkState(self.scene.robot, self.link, computeForwardKinematics=True)
+        state = client.getLinkState(self.scene.robot, self.link)
         return np.array(client.multiplyTransforms(state[4], state[5], self.local, [0, 0, 0, 1])[0])
 
     def update(self) -> None:
@@ -126,8 +126,8 @@ class Behaviours:
         self.coupling = Coupling(
             scene,
             self.grasps,
-            assists.get("coupling_distance", 0.06),
-            int(assists.get("coupling_hold_s", 0.3) * 100),
+            assists.get("coupling_distance", 0.08),
+            int(assists.get("coupling_hold_s", 0.2) * 100),
         )
         self.mode = "stand"
         self.walk_status = "idle"

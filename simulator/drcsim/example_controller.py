@@ -149,12 +149,20 @@ class ExampleController:
         # Back away from the table before heading for the standpipe.
         side = -1.0 if inlet[1] < hose[1] else 1.0
         self.walk(table_x - 1.2, hose[1] + side * 1.0, 0.0)
-        self.walk(inlet[0] - 0.45, inlet[1] + 0.3, 0.0)
-        self.reach("right", inlet, tool=True)
+        pipe_yaw = course["standpipe"]["pose"][2]
+
+        def near(point: list[float], forward: float, left: float) -> list[float]:
+            c, s = math.cos(pipe_yaw), math.sin(pipe_yaw)
+            return [point[0] + c * forward - s * left, point[1] + s * forward + c * left]
+
+        self.walk(*near(inlet, -0.45, 0.3), pipe_yaw)
+        # Line the coupler up in front of the inlet, then push it home.
+        self.reach("right", [*near(inlet, -0.15, 0.0), inlet[2]], tool=True)
+        self.reach("right", inlet, tool=True, limit_s=6.0)
         self.log(f"at the inlet: {self.advance(1.0)['score']}")
         self.reach("right", [0.3, -0.3, 0.0], frame="pelvis")
         self.client.behaviour("arm_rest", hand="right")
-        self.walk(valve[0] - 0.5, valve[1] - 0.3, 0.0)
-        self.reach("left", [valve[0] - 0.12, valve[1], valve[2]])
+        self.walk(*near(valve, -0.5, -0.3), pipe_yaw)
+        self.reach("left", [*near(valve, -0.12, 0.0), valve[2]])
         self.client.behaviour("turn_valve", hand="left", angle=3.5)
         self.until(lambda s: s["behaviour"]["valve"] == "idle", 10.0)
