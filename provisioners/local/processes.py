@@ -1,5 +1,6 @@
-"""Identify processes by PID plus start time, find a host's init, kill by recorded PID."""
+"""Identify processes by PID, start time and boot, find a host's init, kill by recorded PID."""
 
+import functools
 import os
 import signal
 import time
@@ -14,10 +15,17 @@ POLL_SECONDS = 0.05
 
 @dataclass(frozen=True)
 class ProcessId:
-    """A PID together with its start time, so a recycled PID is never mistaken for it."""
+    """A PID with its start time and the machine's boot: a recycled PID never passes for it."""
 
     pid: int
     start_time: int
+    boot_id: str = ""
+
+
+@functools.cache
+def current_boot_id() -> str:
+    """Return the kernel's id of this boot (start times restart from zero at every boot)."""
+    return (PROC / "sys/kernel/random/boot_id").read_text().strip()
 
 
 def start_time(pid: int) -> int | None:
@@ -36,11 +44,13 @@ def start_time(pid: int) -> int | None:
 def identify(pid: int) -> ProcessId | None:
     """Return the ProcessId of a live PID, None when it is gone."""
     started = start_time(pid)
-    return None if started is None else ProcessId(pid, started)
+    return None if started is None else ProcessId(pid, started, current_boot_id())
 
 
 def is_alive(process: ProcessId) -> bool:
-    """Say whether the recorded process still runs (same PID, same start time)."""
+    """Say whether the recorded process still runs (same PID, start time and boot)."""
+    if process.boot_id != current_boot_id():
+        return False
     return start_time(process.pid) == process.start_time
 
 

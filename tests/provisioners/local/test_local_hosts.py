@@ -2,7 +2,7 @@
 
 import subprocess
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from ipaddress import ip_address, ip_network
 from pathlib import Path
 
@@ -232,4 +232,5 @@ def test_fresh_driver_rediscovers_running_nodes(
 def test_recorded_pid_is_identified_by_start_time(lan: Lan) -> None:
     init = processes.identify(lan.sim.extra["pid"])
     assert init is not None and processes.is_alive(init)
-    assert not processes.is_alive(processes.ProcessId(init.pid, init.start_time + 1))
+    assert not processes.is_alive(replace(init, start_time=init.start_time + 1))
+    assert not processes.is_alive(replace(init, boot_id="an-earlier-boot"))

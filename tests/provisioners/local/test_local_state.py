@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 import threading
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -93,7 +94,9 @@ def test_the_lock_serialises_threads(scratch: Path) -> None:
 def test_a_process_is_identified_by_pid_and_start_time() -> None:
     me = processes.identify(os.getpid())
     assert me is not None and processes.is_alive(me)
-    assert not processes.is_alive(ProcessId(me.pid, me.start_time + 1))
+    assert not processes.is_alive(replace(me, start_time=me.start_time + 1))
+    # After a reboot the same PID may well start at the same tick again.
+    assert not processes.is_alive(replace(me, boot_id="an-earlier-boot"))
 
 
 def test_an_exited_process_is_not_alive() -> None:
