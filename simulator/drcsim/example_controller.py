@@ -151,9 +151,9 @@ class ExampleController:
         self.walk(table_x - 1.2, hose[1] + side * 1.0, 0.0)
         pipe_yaw = course["standpipe"]["pose"][2]
 
-        def near(point: list[float], forward: float, left: float) -> list[float]:
+        def near(point: list[float], forward: float, left: float) -> tuple[float, float]:
             c, s = math.cos(pipe_yaw), math.sin(pipe_yaw)
-            return [point[0] + c * forward - s * left, point[1] + s * forward + c * left]
+            return (point[0] + c * forward - s * left, point[1] + s * forward + c * left)
 
         self.walk(*near(inlet, -0.45, 0.3), pipe_yaw)
         # Line the coupler up in front of the inlet, then push it home.
