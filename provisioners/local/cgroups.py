@@ -1,8 +1,10 @@
-"""Per-host cgroups, so that systemd inside one host never manages another host's processes.
+"""Per-host cgroups, so that hosts share no cgroup with each other or with their creator.
 
-systemd-nspawn --keep-unit puts its container under the caller's own cgroup ("payload/").
-Two hosts started by the same process would share it, and each host's systemd would see
-(and stop) the other's services. Each launcher therefore first moves into a cgroup of its own.
+systemd-nspawn --keep-unit puts its container under the caller's own cgroup ("payload/"):
+two hosts started by one process would share it, each host's systemd seeing the other's
+services. And a service manager stopping the orchestrator kills its whole cgroup, hosts
+included, although hosts must outlive it. So each launcher first moves into a cgroup of its
+own at the top of the systemd-relevant hierarchies (cgroup2 and cgroup v1 "name=systemd").
 """
 
 import errno
@@ -17,30 +19,15 @@ POLL_SECONDS = 0.05
 
 
 def host_cgroup_dirs(machine: str, proc: Path = PROC_SELF) -> tuple[Path, ...]:
-    """Return the cgroup dirs a host's launcher should join: one per systemd-relevant hierarchy.
-
-    Those are the cgroup2 hierarchy and the cgroup v1 "name=systemd" one, each taken below this
-    process's current cgroup there.
-    """
-    own_paths: dict[str, str] = {}
-    for line in (proc / "cgroup").read_text().splitlines():
-        hierarchy_id, controllers, path = line.split(":", 2)
-        if hierarchy_id == "0":
-            own_paths["cgroup2"] = path
-        elif "name=systemd" in controllers.split(","):
-            own_paths["name=systemd"] = path
+    """Return the cgroup dirs a host's launcher joins: machine at the top of each hierarchy."""
     dirs: list[Path] = []
     for line in (proc / "mountinfo").read_text().splitlines():
         fields, _, after = line.partition(" - ")
-        mount_root, mount_point = fields.split()[3:5]
+        mount_point = fields.split()[4]
         fstype, _source, options = after.split()[:3]
-        kind = "cgroup2" if fstype == "cgroup2" else None
-        if fstype == "cgroup" and "name=systemd" in options.split(","):
-            kind = "name=systemd"
-        if kind is None or kind not in own_paths:
-            continue
-        relative = os.path.relpath(own_paths.pop(kind), mount_root)
-        dirs.append(Path(os.path.normpath(Path(mount_point) / relative / machine)))
+        systemd_v1 = fstype == "cgroup" and "name=systemd" in options.split(",")
+        if fstype == "cgroup2" or systemd_v1:
+            dirs.append(Path(mount_point) / machine)
     return tuple(dirs)
 
 

@@ -139,17 +139,12 @@ _SYSTEMD_BOOT = (
     "set -euo pipefail\n"
     + _FIRST_BOOT
     + "host_dir=$1 hostname=$2 machine=$3 machine_id=$4 authorized_keys=$5 netns=$6\n"
-    + 'cgroup_count=$7\nshift 7\ncgroups=("${@:1:cgroup_count}")\nshift "$cgroup_count"\n'
+    + "shift 6\n"
     + _DETACH_OTHER_NETNS
     + _MOUNT_OVERLAY
     + r"""
 detach_other_netns "/run/netns/$netns"
 first_boot "$root" "$hostname" "$machine_id" "$authorized_keys" "$@"
-# A cgroup of its own, or this host's systemd would manage other hosts' services (cgroups.py).
-for cgroup in "${cgroups[@]}"; do
-  mkdir -p "$cgroup"
-  printf '%s\n' "$$" > "$cgroup/cgroup.procs"
-done
 propagate=/run/systemd/nspawn/propagate
 mkdir -p "$propagate"
 mount -t tmpfs -o mode=700 "$machine-propagate" "$propagate"
@@ -162,8 +157,21 @@ exec systemd-nspawn --quiet --directory="$root" --boot --machine="$machine" \
 """
 )
 
-# Records the launcher's PID (as seen from the root namespace) before becoming the launcher.
-_LAUNCHER = 'set -eu\nprintf "%s\\n" "$$" > "$1"\nshift\nexec "$@"\n'
+# Records the launcher's PID (as seen from the root namespace) and moves it into the host's
+# own cgroups (see cgroups.py) before becoming the launcher.
+_LAUNCHER = r"""
+set -eu
+printf '%s\n' "$$" > "$1"
+cgroup_count=$2
+shift 2
+while [ "$cgroup_count" -gt 0 ]; do
+  mkdir -p "$1"
+  printf '%s\n' "$$" > "$1/cgroup.procs"
+  shift
+  cgroup_count=$((cgroup_count - 1))
+done
+exec "$@"
+"""
 
 # Paths of the controller that no host may read through the overlay's lower layer "/":
 # its users' keys and dotfiles, server data, scratch space.
@@ -276,8 +284,7 @@ def launch_command(spec: HostSpec, masked_units: list[str]) -> list[str]:
             "env", "SYSTEMD_NSPAWN_API_VFS_WRITABLE=network",
             "unshare", "--mount", "--propagation", "private", "--",
             "bash", "-c", _SYSTEMD_BOOT, "host-boot",
-            *common, str(spec.authorized_keys), spec.netns,
-            str(len(spec.cgroup_dirs)), *map(str, spec.cgroup_dirs), *masked_units,
+            *common, str(spec.authorized_keys), spec.netns, *masked_units,
         ]  # fmt: skip
     else:
         inner = [
@@ -287,7 +294,11 @@ def launch_command(spec: HostSpec, masked_units: list[str]) -> list[str]:
             "bash", "-c", _MINIMAL_INIT, "host-init", *common, str(spec.authorized_keys),
         ]  # fmt: skip
     # setsid -f detaches the launcher: it must outlive (and not be reaped by) this process.
-    return ["setsid", "-f", "bash", "-c", _LAUNCHER, "launcher", str(spec.launcher_pidfile), *inner]
+    cgroups = [str(len(spec.cgroup_dirs)), *map(str, spec.cgroup_dirs)]
+    return [
+        "setsid", "-f", "bash", "-c", _LAUNCHER, "launcher",
+        str(spec.launcher_pidfile), *cgroups, *inner,
+    ]  # fmt: skip
 
 
 def start_host(spec: HostSpec, timeout: float) -> HostProcesses:

@@ -170,9 +170,7 @@ class NodeManager:
                 private_ip=str(lan_address),
                 public_ip=None if public_address is None else str(public_address),
                 machine_id=uuid.uuid4().hex,
-                cgroups=[str(path) for path in host_cgroup_dirs(f"{prefix}-{request.name}")]
-                if request.init == host.INIT_SYSTEMD
-                else [],
+                cgroups=[str(path) for path in host_cgroup_dirs(f"{prefix}-{request.name}")],
                 tags=dict(request.tags),
                 size=request.size,
                 image=request.image,

@@ -120,6 +120,9 @@ def test_pid_1_is_the_hosts_own_init(lan: Lan, ssh_key: SshKey, shells: Shells) 
     assert int(sim.check("ls /proc | grep -c '^[0-9]'")) < 10
     for node, command in ((lan.router, "systemd"), (lan.sim, "tini")):
         assert Path(f"/proc/{node.extra['pid']}/comm").read_text().strip() == command
+        # Each host sits in cgroups of its own, apart from its creator's and other hosts'.
+        cgroups = Path(f"/proc/{node.extra['pid']}/cgroup").read_text()
+        assert f":/{node.extra['machine']}" in cgroups
 
 
 def test_systemd_host_boots_with_ssh_and_base_image_services_masked(

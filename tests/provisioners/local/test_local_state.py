@@ -130,10 +130,7 @@ def test_this_machines_enabled_services_would_be_masked_but_not_sshd() -> None:
         assert "postgresql.service" in masked
 
 
-def test_host_cgroups_sit_below_our_own_in_the_systemd_hierarchies(scratch: Path) -> None:
-    (scratch / "cgroup").write_text(
-        "9:name=systemd:/worker.service\n4:memory:/box\n0::/worker.service\n"
-    )
+def test_host_cgroups_sit_at_the_top_of_the_systemd_hierarchies(scratch: Path) -> None:
     (scratch / "mountinfo").write_text(
         "31 23 0:28 / /sys/fs/cgroup rw,relatime - tmpfs tmpfs rw,mode=755\n"
         "35 31 0:32 / /sys/fs/cgroup/memory rw,relatime - cgroup cgroup rw,memory\n"
@@ -141,13 +138,12 @@ def test_host_cgroups_sit_below_our_own_in_the_systemd_hierarchies(scratch: Path
         "41 31 0:38 / /sys/fs/cgroup/unified rw,relatime - cgroup2 cgroup2 rw\n"
     )
     assert host_cgroup_dirs("cs-router", proc=scratch) == (
-        Path("/sys/fs/cgroup/systemd/worker.service/cs-router"),
-        Path("/sys/fs/cgroup/unified/worker.service/cs-router"),
+        Path("/sys/fs/cgroup/systemd/cs-router"),
+        Path("/sys/fs/cgroup/unified/cs-router"),
     )
 
 
 def test_host_cgroups_on_a_pure_cgroup2_machine(scratch: Path) -> None:
-    (scratch / "cgroup").write_text("0::/\n")
     (scratch / "mountinfo").write_text(
         "30 23 0:26 / /sys/fs/cgroup rw,nosuid - cgroup2 cgroup2 rw,nsdelegate\n"
     )
