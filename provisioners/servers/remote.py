@@ -16,6 +16,10 @@ from provisioners.ssh import Machine, SSHExecutor
 # software); tests check these lists against the plans' own constants.
 CLOUDSIM_CHAINS = ("CLOUDSIM-IN", "CLOUDSIM-FWD")
 CLOUDSIM_PATHS = ("/opt/drcsim", "/opt/cloudsim", DEFAULT_PERSIST_PATH)
+# The server's own versions of what deploy plans overwrite, kept on the server while claimed.
+WORK_DIR = "/var/lib/cloudsim-servers"
+ORIGINALS_DIR = f"{WORK_DIR}/original"
+RESTORED_FILES = ("/etc/hosts", "/etc/motd")
 COMMAND_TIMEOUT_SECONDS = 60.0
 _JUMP_OPTIONS = ("-j", "--jump", "-g", "--goto")
 _KEY_TYPES = ("ssh-", "ecdsa-", "sk-")
@@ -48,6 +52,40 @@ fi
 _SET_HOSTNAME = """printf '%s\\n' {hostname} > /etc/hostname
 hostname {hostname}
 """
+# Saves the originals once per claim: a second prepare must not save CloudSim's versions.
+_SAVE_ORIGINALS = """originals={originals}
+if [ ! -d "$originals" ]; then
+  rm -rf "$originals.partial"
+  mkdir -p "$originals.partial"
+  for path in {files}; do
+    name=$(basename "$path")
+    if [ -e "$path" ]; then cp -p "$path" "$originals.partial/$name"
+    else touch "$originals.partial/$name.absent"; fi
+  done
+  if command -v ip > /dev/null 2>&1; then
+    ip -4 route show default > "$originals.partial/default-route"
+  fi
+  mv "$originals.partial" "$originals"
+fi
+"""
+_RESTORE_ORIGINALS = """originals={originals}
+if [ -d "$originals" ]; then
+  for path in {files}; do
+    name=$(basename "$path")
+    if [ -e "$originals/$name" ]; then cp -p "$originals/$name" "$path"
+    elif [ -e "$originals/$name.absent" ]; then rm -f "$path"; fi
+  done
+  routes="$originals/default-route"
+  if [ -f "$routes" ] && [ "$(ip -4 route show default)" != "$(cat "$routes")" ]; then
+    while ip -4 route show default | grep -q .; do ip -4 route del default; done
+    # each line is a route spec: its words are meant to split
+    while read -r route; do
+      if [ -n "$route" ]; then ip -4 route add $route; fi
+    done < "$routes"
+  fi
+  rm -rf {work_dir}
+fi
+"""
 _LIST_FILTER_RULES = f"""if command -v iptables > /dev/null 2>&1; then
   {iptables_prefix("filter", False)} -S
 fi
@@ -77,7 +115,7 @@ def key_blob(public_key: str) -> str:
 def prepare_script(
     server: Server, hostname: str, public_key: str, stale_keys: Sequence[str]
 ) -> str:
-    """Return the script that removes stale keys, installs public_key and sets the hostname."""
+    """Return the script that installs public_key, saves the originals, sets the hostname."""
     script = _FIND_KEYS.format(user=shlex.quote(server.user))
     stale = _removable_blobs(server, stale_keys)
     if stale:
@@ -85,17 +123,25 @@ def prepare_script(
     blob = key_blob(public_key)
     if blob != server.login_key_blob:  # the login key is there already and must stay
         script += _ADD_KEY.format(blob=shlex.quote(blob), line=shlex.quote(public_key.strip()))
+    script += _SAVE_ORIGINALS.format(
+        originals=shlex.quote(ORIGINALS_DIR), files=shlex.join(RESTORED_FILES)
+    )
     return script + _SET_HOSTNAME.format(hostname=shlex.quote(hostname))
 
 
 def cleanup_script(server: Server, public_keys: Sequence[str], filter_rules: str) -> str:
-    """Return the script that removes CloudSim's keys, firewall chains and files, and renames."""
+    """Return the script that removes CloudSim's keys, chains and files, restores the originals."""
     script = _FIND_KEYS.format(user=shlex.quote(server.user))
     blobs = _removable_blobs(server, public_keys)
     if blobs:
         script += _REMOVE_KEYS.format(blobs=shlex.quote(" ".join(blobs)))
     script += "".join(f"{command}\n" for command in iptables_cleanup(filter_rules))
     script += f"rm -rf -- {shlex.join(CLOUDSIM_PATHS)}\n"
+    script += _RESTORE_ORIGINALS.format(
+        originals=shlex.quote(ORIGINALS_DIR),
+        files=shlex.join(RESTORED_FILES),
+        work_dir=shlex.quote(WORK_DIR),
+    )
     return script + _SET_HOSTNAME.format(hostname=shlex.quote(server.name))
 
 

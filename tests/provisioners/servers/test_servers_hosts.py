@@ -26,10 +26,15 @@ iptables -N CLOUDSIM-FWD
 iptables -I FORWARD -j CLOUDSIM-FWD
 mkdir -p /opt/drcsim/bin /opt/cloudsim/wheelhouse
 touch /opt/drcsim/bin/drcsim /etc/sysctl.d/60-cloudsim.conf
+printf '10.216.9.1 c1-router\n' > /etc/hosts
+printf 'CloudSim constellation c1\n' > /etc/motd
 """
+# What CloudSim overwrites, so that a release must restore it.
+ORIGINALS = "cat /etc/hosts /etc/motd; ip -4 route show default; hostname"
 LEFTOVERS = (
     "iptables -S | grep CLOUDSIM; "
-    "ls -d /opt/drcsim /opt/cloudsim /etc/sysctl.d/60-cloudsim.conf 2>/dev/null; true"
+    "ls -d /opt/drcsim /opt/cloudsim /etc/sysctl.d/60-cloudsim.conf /var/lib/cloudsim-servers"
+    " 2>/dev/null; true"
 )
 
 
@@ -69,6 +74,9 @@ def test_claim_use_rediscover_destroy_and_claim_again(
 ) -> None:
     driver = ServersNodeDriver(inventory=lab.inventory(), state_dir=str(state_dir))
     constellation = make_key_pair("constellation c1")
+    originals = {
+        name: ssh.check(*on(server), lab.login, ORIGINALS) for name, server in lab.nodes.items()
+    }
     assert driver.ex_create_network("c1").cidr == lab.cidr
     nodes = claim(driver, "c1", constellation, {"router": True, "sim": False})
 
@@ -80,6 +88,7 @@ def test_claim_use_rediscover_destroy_and_claim_again(
     for node in nodes.values():
         assert ssh.check(*on(node), constellation, "hostname").strip() == node.name
         ssh.check(*on(node), constellation, DEPLOYED)
+    ssh.check(*on(sim), constellation, f"ip -4 route replace default via {router.private_ips[0]}")
     again = driver.create_node(
         name="c1-sim", auth=NodeAuthSSHKey(constellation.public_line), ex_network="c1"
     )
@@ -106,6 +115,7 @@ def test_claim_use_rediscover_destroy_and_claim_again(
         assert fresh.destroy_node(node)
     for name, server in lab.nodes.items():
         assert ssh.check(*on(server), lab.login, "hostname").strip() == name
+        assert ssh.check(*on(server), lab.login, ORIGINALS) == originals[name]
         assert ssh.check(*on(server), lab.login, LEFTOVERS) == ""
         keys = ssh.check(*on(server), lab.login, "cat /root/.ssh/authorized_keys")
         assert constellation.blob not in keys and lab.login.blob in keys
@@ -147,7 +157,8 @@ def test_an_unreachable_server_is_released_and_cleaned_before_its_next_claim(
     (node,) = claim(driver, "c3", second, {"sim": False}).values()
     keys = ssh.check(*on(node), lab.login, "cat /root/.ssh/authorized_keys")
     assert first.blob not in keys and second.blob in keys
-    assert ssh.check(*on(node), lab.login, LEFTOVERS) == ""
+    # the earlier node's leftovers are gone; the server's originals are kept while claimed
+    assert ssh.check(*on(node), lab.login, LEFTOVERS) == "/var/lib/cloudsim-servers\n"
     assert [s["warning"] for s in driver.ex_list_servers()] == [None, None]
     assert driver.destroy_node(node) and driver.ex_destroy_network("c3")
 
