@@ -68,3 +68,9 @@ def test_falls_are_counted_and_the_third_ends_the_run(make_sim, tmp_path) -> Non
     assert sim.step(100) == 0  # nothing runs after the end
     events = (tmp_path / "run" / "score.jsonl").read_text().splitlines()
     assert '"reason": "falls"' in events[-1] and len(events) == 5
+
+
+def test_simulation_ends_at_its_time_limit(make_sim) -> None:
+    sim = make_sim("vrc_task_3", "4", time_limit_s=0.5)
+    assert sim.step(2000) == 500
+    assert sim.ended and sim.scorer.end_reason == "time_limit"

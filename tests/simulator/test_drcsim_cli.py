@@ -1,0 +1,41 @@
+"""The command-line entry points that other parts of CloudSim call."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+
+def _drcsim(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "drcsim.cli", *args], capture_output=True, text=True, timeout=120
+    )
+
+
+def test_selftest_prints_one_json_line_with_rtf_and_ok() -> None:
+    done = _drcsim("selftest", "--seconds", "0.5", "--json", "--min-rtf", "0")
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result["ok"] is True and result["rtf"] > 0 and result["sim_s"] == 0.5
+
+
+def test_selftest_fails_when_the_rtf_is_below_the_minimum() -> None:
+    done = _drcsim("selftest", "--seconds", "0.2", "--json", "--no-sensors", "--min-rtf", "1e9")
+    assert done.returncode == 1 and json.loads(done.stdout)["ok"] is False
+
+
+def test_bench_reports_every_world_and_the_round_trip() -> None:
+    done = _drcsim("bench", "--json", "--seconds", "0.1", "--samples", "20")
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert {(r["world"], r["sensors"]) for r in result["rtf"]} == {
+        (w, s) for w in ("vrc_task_1", "vrc_task_2", "vrc_task_3") for s in (False, True)
+    }
+    assert result["round_trip"]["samples"] == 20
+    assert result["round_trip"]["p99_ms"] >= result["round_trip"]["p50_ms"] > 0
+
+
+def test_unknown_world_is_a_one_line_error() -> None:
+    done = _drcsim("serve", "--world", "vrc_task_7")
+    assert done.returncode != 0 and "invalid choice" in done.stderr

@@ -1,0 +1,54 @@
+"""The vehicle responds only to its human interfaces, and only a seated robot moves them."""
+
+from __future__ import annotations
+
+from drcsim.protocol import check_command
+
+
+def _command(sim, **message) -> dict:
+    return sim.apply_command(check_command(message))
+
+
+def _walk(sim, x: float, y: float, yaw: float) -> None:
+    assert _command(sim, op="behaviour", name="walk", pose=[x, y, yaw])["ok"]
+    for _ in range(40):
+        sim.step(250)
+        if sim.behaviours.walk_status != "walking":
+            break
+
+
+def test_driving_through_the_interfaces(make_sim) -> None:
+    sim = make_sim("vrc_task_1", "1")
+    refused = _command(sim, op="behaviour", name="drive", direction="forward", throttle=1.0)
+    assert refused["ok"] is False and "seat" in refused["error"]
+    assert _command(sim, op="behaviour", name="enter_vehicle")["ok"] is False  # too far
+    door = sim.scene.course["vehicle"]["driver_door"]
+    _walk(sim, door[0] - 2.5, door[1], 0.0)
+    _walk(sim, door[0], door[1], 0.0)
+    assert _command(sim, op="behaviour", name="enter_vehicle")["ok"]
+    car = sim.scene.vehicle
+    start_x = sim.client.getBasePositionAndOrientation(car)[0][0]
+
+    _command(sim, op="behaviour", name="drive", direction="neutral", throttle=1.0)
+    sim.step(1000)
+    assert abs(sim.client.getBasePositionAndOrientation(car)[0][0] - start_x) < 0.05
+    assert sim.drive.interface_positions()["throttle_pedal"] > 0.3  # pedal down, no gear
+
+    _command(sim, op="behaviour", name="drive", direction="forward", throttle=1.0)
+    sim.step(1500)
+    moved_x = sim.client.getBasePositionAndOrientation(car)[0][0]
+    assert moved_x > start_x + 1.0 and sim.drive.speed() > 1.0
+
+    _command(
+        sim,
+        op="behaviour",
+        name="drive",
+        direction="forward",
+        throttle=0.0,
+        brake=1.0,
+        hand_brake=True,
+    )
+    sim.step(2000)
+    assert sim.drive.speed() < 0.05
+    assert _command(sim, op="behaviour", name="exit_vehicle")["ok"]
+    assert not sim.behaviours.seat.seated and not sim.scorer.down
