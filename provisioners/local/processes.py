@@ -49,7 +49,8 @@ def identify(pid: int) -> ProcessId | None:
 
 def is_alive(process: ProcessId) -> bool:
     """Say whether the recorded process still runs (same PID, start time and boot)."""
-    if process.boot_id != current_boot_id():
+    # Records written before boot ids were kept have none: judge those by start time alone.
+    if process.boot_id and process.boot_id != current_boot_id():
         return False
     return start_time(process.pid) == process.start_time
 
