@@ -178,3 +178,37 @@ def test_a_server_that_refuses_the_login_key_fails_its_claim(lab: Lab, state_dir
     assert driver.destroy_node(node)
     assert driver.list_nodes() == []
     assert driver.ex_destroy_network("c5")
+
+
+OPERATOR = "csoperator"
+ADD_OPERATOR = f"""set -e
+useradd --create-home --shell /bin/sh {OPERATOR}
+install -d -m 700 -o {OPERATOR} -g {OPERATOR} /home/{OPERATOR}/.ssh
+install -m 600 -o {OPERATOR} -g {OPERATOR} /root/.ssh/authorized_keys /home/{OPERATOR}/.ssh/
+printf '%s ALL=(ALL) NOPASSWD: ALL\\n' {OPERATOR} > /etc/sudoers.d/{OPERATOR}
+"""
+REMOVE_OPERATOR = f"rm -f /etc/sudoers.d/{OPERATOR}; userdel --remove {OPERATOR}"
+
+
+def test_a_login_user_other_than_root_works_through_sudo(
+    lab: Lab, state_dir: Path, ssh: Shell
+) -> None:
+    server = lab.nodes["srv-b"]
+    ssh.check(*on(server), lab.login, ADD_OPERATOR)
+    try:
+        driver = ServersNodeDriver(
+            inventory=lab.inventory(**{"srv-b": {"user": OPERATOR}}), state_dir=str(state_dir)
+        )
+        key = make_key_pair("constellation c6")
+        driver.ex_create_network("c6")
+        (node,) = claim(driver, "c6", key, {"sim": False}).values()
+        assert (node.id, node.extra["ssh_user"]) == ("srv-b", OPERATOR)
+        installed = f"stat -c %U /home/{OPERATOR}/.ssh/authorized_keys; hostname"
+        assert ssh.check(*on(server), lab.login, installed) == f"{OPERATOR}\nc6-sim\n"
+        operator_keys = f"cat /home/{OPERATOR}/.ssh/authorized_keys"
+        assert key.blob in ssh.check(*on(server), lab.login, operator_keys)
+        assert driver.destroy_node(node) and driver.ex_destroy_network("c6")
+        assert key.blob not in ssh.check(*on(server), lab.login, operator_keys)
+        assert ssh.check(*on(server), lab.login, "hostname") == "srv-b\n"
+    finally:
+        ssh.check(*on(server), lab.login, REMOVE_OPERATOR)
