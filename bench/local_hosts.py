@@ -26,7 +26,8 @@ class Figures:
     """What one round measured."""
 
     init: str
-    nodes: int
+    networks: int
+    hosts: int
     create_seconds: float
     destroy_seconds: float
     pss_mib_per_host: float
@@ -47,8 +48,10 @@ def tmpfs_used_kib(directory: Path) -> int:
     return (stats.f_blocks - stats.f_bfree) * stats.f_frsize // 1024
 
 
-def run_round(driver: LocalNodeDriver, init: str, count: int, settle: float) -> Figures:
-    """Create a network and count hosts at once, measure, destroy them at once."""
+def run_round(
+    driver: LocalNodeDriver, init: str, networks: int, per_network: int, settle: float
+) -> Figures:
+    """Create networks, each with per_network hosts, all at once; measure; destroy all at once."""
     public_key = (
         Ed25519PrivateKey.generate()
         .public_key()
@@ -56,29 +59,32 @@ def run_round(driver: LocalNodeDriver, init: str, count: int, settle: float) -> 
     )
     auth = NodeAuthSSHKey(public_key.decode())
     started = time.monotonic()
-    network = driver.ex_create_network(f"bench-{init}")
-    with ThreadPoolExecutor(max_workers=count) as pool:
+    lans = [driver.ex_create_network(f"bench-{init}-{n}") for n in range(networks)]
+    with ThreadPoolExecutor(max_workers=networks * per_network) as pool:
         futures = [
             pool.submit(
-                driver.create_node, f"bench-{init}-{index}", None, None, auth=auth,
-                ex_network=network, ex_public=index == 0, ex_init=init,
+                driver.create_node, f"{lan.name}-{index}", None, None, auth=auth,
+                ex_network=lan, ex_public=index == 0, ex_init=init,
             )
-            for index in range(count)
+            for lan in lans
+            for index in range(per_network)
         ]  # fmt: skip
         nodes = [future.result() for future in futures]
     create_seconds = time.monotonic() - started
-    # Let late boot jobs (journald flush, logind, user sessions) finish before measuring.
+    # Let late boot jobs (journald flush, logind) finish before measuring memory.
     time.sleep(settle)
-    pss = sum(host_pss_kib(node) for node in nodes) / count
-    tmpfs = tmpfs_used_kib(driver.hosts_dir) / count
+    pss = sum(host_pss_kib(node) for node in nodes) / len(nodes)
+    tmpfs = tmpfs_used_kib(driver.hosts_dir) / len(nodes)
     started = time.monotonic()
-    with ThreadPoolExecutor(max_workers=count) as pool:
+    with ThreadPoolExecutor(max_workers=len(nodes)) as pool:
         assert all(pool.map(driver.destroy_node, nodes))
-    driver.ex_destroy_network(network)
+    for lan in lans:
+        driver.ex_destroy_network(lan)
     destroy_seconds = time.monotonic() - started
     return Figures(
         init=init,
-        nodes=count,
+        networks=networks,
+        hosts=len(nodes),
         create_seconds=create_seconds,
         destroy_seconds=destroy_seconds,
         pss_mib_per_host=pss / 1024,
@@ -89,7 +95,8 @@ def run_round(driver: LocalNodeDriver, init: str, count: int, settle: float) -> 
 def main() -> int:
     """Parse arguments, run the rounds, print the figures."""
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--nodes", type=int, default=4)
+    parser.add_argument("--nodes", type=int, default=4, help="hosts per network")
+    parser.add_argument("--networks", type=int, default=1, help="networks created at once")
     parser.add_argument("--init", choices=["systemd", "minimal", "both"], default="both")
     parser.add_argument("--rounds", type=int, default=1)
     parser.add_argument("--settle", type=float, default=3.0, help="seconds before measuring RAM")
@@ -104,23 +111,23 @@ def main() -> int:
     try:
         for _ in range(args.rounds):
             for init in modes:
-                results.append(run_round(driver, init, args.nodes, args.settle))
+                results.append(run_round(driver, init, args.networks, args.nodes, args.settle))
     finally:
-        for node in driver.list_nodes():
-            driver.destroy_node(node)
-        for network in driver.ex_list_networks():
-            driver.ex_destroy_network(network)
+        leaked = driver.ex_sweep()
         shutil.rmtree(state_dir)
-    header = ["init", "hosts", "create s", "destroy s", "PSS MiB/host", "tmpfs MiB/host"]
-    print(f"{header[0]:8} {header[1]:>5} {header[2]:>9} {header[3]:>9} {header[4]:>12} "
-          f"{header[5]:>14}")  # fmt: skip
+    if leaked:
+        print(f"leaked (now removed): {leaked}", file=sys.stderr)
+    print(
+        f"{'init':8} {'networks':>8} {'hosts':>5} {'create s':>9} {'destroy s':>9} "
+        f"{'PSS MiB/host':>12} {'tmpfs MiB/host':>14}"
+    )
     for figures in results:
         print(
-            f"{figures.init:8} {figures.nodes:5d} {figures.create_seconds:9.2f} "
-            f"{figures.destroy_seconds:9.2f} {figures.pss_mib_per_host:12.1f} "
-            f"{figures.tmpfs_mib_per_host:14.1f}"
+            f"{figures.init:8} {figures.networks:8d} {figures.hosts:5d} "
+            f"{figures.create_seconds:9.2f} {figures.destroy_seconds:9.2f} "
+            f"{figures.pss_mib_per_host:12.1f} {figures.tmpfs_mib_per_host:14.1f}"
         )
-    return 0
+    return 1 if leaked else 0
 
 
 if __name__ == "__main__":

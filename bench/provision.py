@@ -23,7 +23,7 @@ from cloudsim.config import Config  # noqa: E402
 from cloudsim.extensions import db  # noqa: E402
 from cloudsim.fleet import service  # noqa: E402
 from cloudsim.fleet.engine import SIMULATOR_SOURCE  # noqa: E402
-from cloudsim.fleet.providers import make_driver  # noqa: E402
+from cloudsim.fleet.providers import open_provider  # noqa: E402
 from cloudsim.models import Job  # noqa: E402
 from constellations.plans.software import build_wheelhouse  # noqa: E402
 from tests.support.servers import RedisServer  # noqa: E402
@@ -48,31 +48,44 @@ def main() -> None:
         raise SystemExit("bench/provision.py needs root (the local provider makes namespaces)")
     instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-provision-"))
     redis = RedisServer(instance / "redis")
-    env = {"CLOUDSIM_INSTANCE_DIR": str(instance), "CLOUDSIM_REDIS_URL": redis.url(),
-           "CLOUDSIM_LOCAL_PREFIX": "csbench", "CLOUDSIM_LOCAL_SUBNET_POOL": "10.214.0.0/16",
-           "CLOUDSIM_LOCAL_PUBLIC_CIDR": "198.18.14.0/24", "CLOUDSIM_LOG_LEVEL": "WARNING"}
+    env = {
+        "CLOUDSIM_INSTANCE_DIR": str(instance),
+        "CLOUDSIM_REDIS_URL": redis.url(),
+        "CLOUDSIM_LOCAL_PREFIX": "csbench",
+        "CLOUDSIM_LOCAL_SUBNET_POOL": "10.214.0.0/16",
+        "CLOUDSIM_LOCAL_PUBLIC_CIDR": "198.18.14.0/24",
+        "CLOUDSIM_LOG_LEVEL": "WARNING",
+    }
     app = create_app(Config.from_env(env))
     try:
         with app.app_context():
             db.create_all()
             started = time.perf_counter()
-            build_wheelhouse(SIMULATOR_SOURCE, instance / "wheelhouse")
+            build_wheelhouse(
+                SIMULATOR_SOURCE, instance / "wheelhouse", app.config["CLOUDSIM"].machine_python
+            )
             wheelhouse = time.perf_counter() - started
-            with start_worker(app.extensions["celery"], pool="threads", concurrency=3,
-                              perform_ping_check=False, loglevel="WARNING",
-                              shutdown_timeout=60):
+            with start_worker(
+                app.extensions["celery"],
+                pool="threads",
+                concurrency=3,
+                perform_ping_check=False,
+                loglevel="WARNING",
+                shutdown_timeout=60,
+            ):
                 _, job = service.launch(None, name="bench-one", kind="vrc", provider="local")
                 one = wait([job.id])
                 names = [f"bench-{n}" for n in ("a", "b", "c")]
-                jobs = [service.launch(None, name=n, kind="vrc", provider="local")[1].id
-                        for n in names]
+                jobs = [
+                    service.launch(None, name=n, kind="vrc", provider="local")[1].id for n in names
+                ]
                 three = wait(jobs)
                 started = time.perf_counter()
                 terminate_one = wait([service.terminate(None, "bench-one").id])
                 terminate_three = wait([service.terminate(None, n).id for n in names])
     finally:
         with app.app_context():
-            driver = make_driver("local", app.config["CLOUDSIM"])
+            driver = open_provider("local", app.config["CLOUDSIM"]).driver
             for node in driver.list_nodes():  # whatever a failed run left behind
                 driver.destroy_node(node)
             for network in driver.ex_list_networks():
@@ -81,8 +94,10 @@ def main() -> None:
     print("provisioning benchmark (local provider, vrc = router + sim + fc1 + fc2)")
     print(f"  wheelhouse build (once, cached)        {wheelhouse:6.1f} s")
     print(f"  one constellation to ready             {one:6.1f} s   (target < 60 s)")
-    print(f"  three at once to ready                 {three:6.1f} s   "
-          f"ratio {three / one:.2f} x one (target < 2)")
+    print(
+        f"  three at once to ready                 {three:6.1f} s   "
+        f"ratio {three / one:.2f} x one (target < 2)"
+    )
     print(f"  terminate one                          {terminate_one:6.1f} s")
     print(f"  terminate three at once                {terminate_three:6.1f} s")
 

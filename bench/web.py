@@ -70,25 +70,50 @@ def seed(env: dict[str, str]) -> dict[str, str]:
         teams = [Team(name=f"Team {i:02d}") for i in range(30)]
         db.session.add_all(teams)
         db.session.flush()
-        users = [User(email=f"user{i}@example.org", role=Role.USER, team_id=teams[i % 30].id,
-                      password_hash=password_hash) for i in range(296)]
-        users += [User(email=f"officer{i}@example.org", role=Role.OFFICER,
-                       password_hash=password_hash) for i in range(3)]
+        users = [
+            User(
+                email=f"user{i}@example.org",
+                role=Role.USER,
+                team_id=teams[i % 30].id,
+                password_hash=password_hash,
+            )
+            for i in range(296)
+        ]
+        users += [
+            User(email=f"officer{i}@example.org", role=Role.OFFICER, password_hash=password_hash)
+            for i in range(3)
+        ]
         admin = User(email="admin@example.org", role=Role.ADMIN, password_hash=password_hash)
         db.session.add_all([*users, admin])
         for team in teams:
-            constellation = Constellation(name=f"vrc-{team.id}", kind="vrc", provider="local",
-                                          team_id=team.id, state=ConstellationState.READY)
+            constellation = Constellation(
+                name=f"vrc-{team.id}",
+                kind="vrc",
+                provider="local",
+                team_id=team.id,
+                state=ConstellationState.READY,
+            )
             for n, role in enumerate(("router", "sim", "fc1", "fc2")):
-                constellation.machines.append(Machine(
-                    name=role, role=role, state=MachineState.READY,
-                    private_ip=f"10.{team.id}.0.{50 + n}"))
+                constellation.machines.append(
+                    Machine(
+                        name=role,
+                        role=role,
+                        state=MachineState.READY,
+                        private_ip=f"10.{team.id}.0.{50 + n}",
+                    )
+                )
             db.session.add(constellation)
         now = utcnow()
         db.session.add_all(
-            Job(id=str(uuid.uuid4()), kind="diagnostics", state=JobState.SUCCEEDED,
-                team_id=teams[i % 30].id, progress=100, log="ok\n" * 20,
-                created_at=now - timedelta(minutes=i))
+            Job(
+                id=str(uuid.uuid4()),
+                kind="diagnostics",
+                state=JobState.SUCCEEDED,
+                team_id=teams[i % 30].id,
+                progress=100,
+                log="ok\n" * 20,
+                created_at=now - timedelta(minutes=i),
+            )
             for i in range(1000)
         )
         db.session.commit()
@@ -100,8 +125,11 @@ def log_in(base: str, email: str) -> requests.Session:
     page = session.get(f"{base}/login", timeout=30).text
     token = re.search(r'name="csrf_token" type="hidden" value="([^"]+)"', page)
     assert token
-    response = session.post(f"{base}/login", timeout=30,
-                            data={"email": email, "password": PASSWORD, "csrf_token": token[1]})
+    response = session.post(
+        f"{base}/login",
+        timeout=30,
+        data={"email": email, "password": PASSWORD, "csrf_token": token[1]},
+    )
     assert response.url == f"{base}/", f"login as {email} failed"
     return session
 
@@ -114,8 +142,11 @@ def drive(base: str, headers: dict[str, str], clients: int, rounds: int) -> dict
 
     def client(number: int) -> None:
         kind = ("admin", "officer", "user")[number % 3]
-        email = {"admin": "admin@example.org", "officer": f"officer{number % 3}@example.org",
-                 "user": f"user{number}@example.org"}[kind]
+        email = {
+            "admin": "admin@example.org",
+            "officer": f"officer{number % 3}@example.org",
+            "user": f"user{number}@example.org",
+        }[kind]
         session = log_in(base, email)
         api = requests.Session()
         api.headers.update(headers)
@@ -151,17 +182,28 @@ def main() -> None:
     args = parser.parse_args()
     instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-"))
     web = free_port()
-    env = dict(os.environ, CLOUDSIM_INSTANCE_DIR=str(instance), CLOUDSIM_BIND=f"127.0.0.1:{web}",
-               CLOUDSIM_REDIS_PORT=str(free_port()), CLOUDSIM_LOG_LEVEL="WARNING",
-               CLOUDSIM_ADMIN_EMAIL="admin@example.org", CLOUDSIM_LOGIN_LIMIT="1000 per minute")
+    env = dict(
+        os.environ,
+        CLOUDSIM_INSTANCE_DIR=str(instance),
+        CLOUDSIM_BIND=f"127.0.0.1:{web}",
+        CLOUDSIM_REDIS_PORT=str(free_port()),
+        CLOUDSIM_LOG_LEVEL="WARNING",
+        CLOUDSIM_ADMIN_EMAIL="admin@example.org",
+        CLOUDSIM_LOGIN_LIMIT="1000 per minute",
+    )
     env.pop("CLOUDSIM_REDIS_URL", None)
     if args.database_url:
         env["CLOUDSIM_DATABASE_URL"] = args.database_url
     headers = seed(env)
     log = instance / "up.log"
     with log.open("wb") as out:
-        stack = subprocess.Popen([sys.executable, "-m", "cloudsim.cli", "up"], env=env,
-                                 stdout=out, stderr=subprocess.STDOUT, cwd=PROJECT)
+        stack = subprocess.Popen(
+            [sys.executable, "-m", "cloudsim.cli", "up"],
+            env=env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            cwd=PROJECT,
+        )
     try:
         deadline = time.monotonic() + 90
         while "CloudSim is running" not in log.read_text():
@@ -176,9 +218,11 @@ def main() -> None:
         stack.send_signal(signal.SIGINT)
         stack.wait(60)
     total = sum(len(v) for v in timings.values())
-    print(f"web benchmark: {args.clients} clients, {total} requests in {wall:.1f} s "
-          f"({total / wall:.0f} req/s), gunicorn {env.get('CLOUDSIM_WEB_WORKERS', '2')} workers, "
-          f"{'PostgreSQL' if args.database_url else 'SQLite'}")
+    print(
+        f"web benchmark: {args.clients} clients, {total} requests in {wall:.1f} s "
+        f"({total / wall:.0f} req/s), gunicorn {env.get('CLOUDSIM_WEB_WORKERS', '2')} workers, "
+        f"{'PostgreSQL' if args.database_url else 'SQLite'}"
+    )
     print("seeded: 30 teams, 120 machines, 300 users, 1,000 jobs")
     print(f"{'request':34} {'n':>5} {'p50 ms':>8} {'p95 ms':>8} {'p95/p50':>8}")
     for name, values in sorted(timings.items()):

@@ -84,6 +84,10 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_LOCAL_PUBLIC_CIDR": Setting(
         "198.18.0.0/24", "The local provider's shared 'public' network"
     ),
+    "CLOUDSIM_MACHINE_PYTHON": Setting(
+        "/usr/bin/python3",
+        "A Python like the machines' (Debian 12's), used to build the wheels they install",
+    ),
     "CLOUDSIM_ARGON2_TIME_COST": Setting("3", "Argon2id passes when hashing a password"),
     "CLOUDSIM_ARGON2_MEMORY_KIB": Setting("65536", "Argon2id memory per password hash, KiB"),
     "CLOUDSIM_LOG_LEVEL": Setting("INFO", "Log level of the web server and workers"),
@@ -114,6 +118,7 @@ class Config:
     local_prefix: str
     local_subnet_pool: str
     local_public_cidr: str
+    machine_python: str
     argon2_time_cost: int
     argon2_memory_kib: int
     log_level: str
@@ -185,6 +190,7 @@ class Config:
             local_prefix=get("CLOUDSIM_LOCAL_PREFIX"),
             local_subnet_pool=get("CLOUDSIM_LOCAL_SUBNET_POOL"),
             local_public_cidr=get("CLOUDSIM_LOCAL_PUBLIC_CIDR"),
+            machine_python=get("CLOUDSIM_MACHINE_PYTHON"),
             argon2_time_cost=number("CLOUDSIM_ARGON2_TIME_COST"),
             argon2_memory_kib=number("CLOUDSIM_ARGON2_MEMORY_KIB"),
             log_level=get("CLOUDSIM_LOG_LEVEL").upper(),

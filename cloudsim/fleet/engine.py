@@ -9,6 +9,7 @@ leaking machines.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -20,14 +21,14 @@ from cloudsim.config import Config
 from cloudsim.errors import CloudSimError, NotFound
 from cloudsim.extensions import db
 from cloudsim.fleet.connect import MachineHostKeys, targets
-from cloudsim.fleet.keys import KeyPair, constellation_keypair
+from cloudsim.fleet.keys import KeyPair, constellation_keypair, instance_admin_password
 from cloudsim.fleet.providers import NetworkDriver, Provider, open_provider
 from cloudsim.fleet.verify import verify_constellation
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.models import Constellation, ConstellationState, MachineState, Secret
 from constellations.definition import ConstellationKind, load_kind
 from constellations.plans import PLANS, Action, PlanContext, PlanItem, firewall
-from constellations.plans.software import build_wheelhouse
+from constellations.plans.software import build_source_bundle, build_wheelhouse
 from provisioners.operations import apply
 from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
 from provisioners.ssh import Machine as Target
@@ -104,10 +105,21 @@ def _launch(
             )
         _deploy(ctx, executor, reach, {n: firewall(c) for n, c in contexts.items()})
         ctx.stage("install", 50)
+        cache = config.instance_dir / "wheelhouse"
         if any(set(m.plan) & NEEDS_WHEELHOUSE for m in kind.machines):
             ctx.log("building the simulator's wheelhouse (cached after the first time)")
-            wheelhouse = build_wheelhouse(SIMULATOR_SOURCE, config.instance_dir / "wheelhouse")
-            contexts = {n: _with_wheelhouse(c, wheelhouse) for n, c in contexts.items()}
+            wheelhouse = build_wheelhouse(SIMULATOR_SOURCE, cache, config.machine_python)
+            contexts = {n: replace(c, wheelhouse=wheelhouse) for n, c in contexts.items()}
+        if any("cloudsim_server" in m.plan for m in kind.machines):
+            ctx.log("bundling CloudSim's source and wheels (cached after the first time)")
+            password = instance_admin_password(constellation)
+            ctx.mask(password)
+            executor.add_secret(password)
+            bundle = build_source_bundle(PROJECT_ROOT, cache, config.machine_python)
+            contexts = {
+                n: replace(c, app_bundle=bundle, secrets={"cloudsim_admin_password": password})
+                for n, c in contexts.items()
+            }
         plans = {
             n: [item for plan in c.machine.plan for item in PLANS[plan](c)]
             for n, c in contexts.items()
@@ -238,12 +250,6 @@ def _plan_context(
         subnet=subnet,
         addresses={m.name: m.private_ip or "" for m in constellation.machines},
     )
-
-
-def _with_wheelhouse(context: PlanContext, wheelhouse: Path) -> PlanContext:
-    from dataclasses import replace
-
-    return replace(context, wheelhouse=wheelhouse)
 
 
 def _deploy(

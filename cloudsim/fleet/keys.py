@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import secrets
 from dataclasses import dataclass
 
 from cryptography.hazmat.primitives import serialization
@@ -12,6 +13,7 @@ from cloudsim.extensions import db
 from cloudsim.models import Constellation, Secret, SecretKind
 
 SSH_KEY_NAME = "ssh"
+INSTANCE_ADMIN_PASSWORD = "cloudsim-admin-password"  # noqa: S105 (a name, not a secret)
 
 
 @dataclass(frozen=True)
@@ -69,3 +71,25 @@ def constellation_keypair(constellation: Constellation) -> KeyPair:
         .decode()
     )
     return KeyPair(secret.value, f"{public} cloudsim-{constellation.name}")
+
+
+def instance_admin_password(constellation: Constellation) -> str:
+    """Return the admin password of the CloudSim a `cloudsim` constellation runs (made once)."""
+    secret = db.session.scalar(
+        select(Secret).where(
+            Secret.owner_type == "constellation",
+            Secret.owner_id == constellation.id,
+            Secret.name == INSTANCE_ADMIN_PASSWORD,
+        )
+    )
+    if secret is None:
+        secret = Secret(
+            kind=SecretKind.CLOUD_CREDENTIALS,
+            owner_type="constellation",
+            owner_id=constellation.id,
+            name=INSTANCE_ADMIN_PASSWORD,
+            value=secrets.token_urlsafe(18),
+        )
+        db.session.add(secret)
+        db.session.commit()
+    return secret.value

@@ -13,12 +13,13 @@ from cloudsim.audit.service import record
 from cloudsim.auth.policy import require_role, require_team_access
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.fleet.keys import constellation_keypair
+from cloudsim.fleet.keys import constellation_keypair, instance_admin_password
 from cloudsim.fleet.providers import PROVIDERS
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Constellation, ConstellationState, Job, Machine, Role, Team, User
 from constellations.definition import DefinitionError, load_kind
 from constellations.plans import PLANS
+from constellations.plans.roles import CLOUDSIM_ADMIN_EMAIL, CLOUDSIM_PORT
 
 NAME = re.compile(r"[a-z0-9]([a-z0-9-]{0,22}[a-z0-9])?\Z")
 BUSY = (ConstellationState.PENDING, ConstellationState.LAUNCHING, ConstellationState.TERMINATING)
@@ -194,6 +195,17 @@ def ssh_bundle(actor: User | None, ref: int | str) -> tuple[str, bytes]:
         bundle.writestr(key_info, keys.private)
         bundle.writestr(f"{constellation.name}.key.pub", keys.public + "\n")
         bundle.writestr("README.txt", "\n".join(lines) + "\n")
+        if constellation.kind == "cloudsim":
+            server = next((m for m in constellation.machines if m.public_ip), None)
+            url = f"http://{server.public_ip}:{CLOUDSIM_PORT}/" if server else "(not created yet)"
+            bundle.writestr(
+                "cloudsim-admin.txt",
+                (
+                    f"CloudSim of {constellation.name}: {url}\n"
+                    f"admin: {CLOUDSIM_ADMIN_EMAIL}\n"
+                    f"password: {instance_admin_password(constellation)}\n"
+                ),
+            )
     record(
         "constellation.ssh_bundle",
         actor,

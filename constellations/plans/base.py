@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,6 +50,9 @@ class PlanContext:
     addresses: dict[str, str]
     wheelhouse: Path | None = None
     vpn: VpnMaterial | None = None  # routers only
+    router_wheelhouse: Path | None = None  # routers with a VPN: csrouter and its wheels
+    app_bundle: Path | None = None  # CloudSim servers only: source + wheels
+    secrets: Mapping[str, str] = field(default_factory=dict, repr=False)
     templates: MachineTemplates = field(default_factory=MachineTemplates)
 
     @property

@@ -6,7 +6,7 @@ import hashlib
 import shlex
 import shutil
 import subprocess
-import sys
+import tarfile
 import tempfile
 from pathlib import Path
 
@@ -15,6 +15,7 @@ from provisioners.ssh import Machine as Target
 from provisioners.ssh import SSHExecutor
 
 SUMS = "SHA256SUMS"
+SOURCE_TARBALL = "cloudsim-source.tar.gz"
 REMOTE_ROOT = "/opt/cloudsim/wheelhouse"
 _SKIP = {"__pycache__", ".egg-info", "build", "dist", ".pytest_cache"}
 
@@ -34,10 +35,12 @@ def _source_digest(source: Path) -> str:
     return digest.hexdigest()[:16]
 
 
-def build_wheelhouse(source: Path, cache_dir: Path) -> Path:
+def build_wheelhouse(source: Path, cache_dir: Path, python: str) -> Path:
     """Return a folder of wheels for the distribution in `source` and all its dependencies.
 
-    Built once per version of the source and cached; a half-built folder is never used.
+    `python` is an interpreter like the machines' (wheels and environment markers depend on
+    its version). Built once per version of the source and cached; a half-built folder is
+    never used.
     """
     target = cache_dir / f"{source.name}-{_source_digest(source)}"
     if (target / SUMS).is_file():
@@ -45,7 +48,7 @@ def build_wheelhouse(source: Path, cache_dir: Path) -> Path:
     cache_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=cache_dir, prefix=".building-") as scratch:
         result = subprocess.run(
-            [sys.executable, "-m", "pip", "wheel", "--quiet", "--wheel-dir", scratch, str(source)],
+            [python, "-m", "pip", "wheel", "--quiet", "--wheel-dir", scratch, str(source)],
             capture_output=True,
             text=True,
             check=False,
@@ -102,3 +105,89 @@ def install_wheelhouse(wheelhouse: Path, venv: str, requirement: str) -> Action:
         return True
 
     return Action(f"install {requirement} from {wheelhouse.name} into {venv}", run)
+
+
+def build_source_bundle(root: Path, cache_dir: Path, python: str) -> Path:
+    """Return a folder with a tarball of CloudSim's tracked source files and a wheelhouse of
+    everything it needs to run (plus the build tools for an offline editable install)."""
+    files = subprocess.run(
+        ["git", "-C", str(root), "ls-files", "-z"], capture_output=True, check=False
+    )
+    if files.returncode != 0:
+        raise WheelhouseError(f"{root} is not a git checkout: cannot bundle CloudSim's source")
+    names = sorted(name for name in files.stdout.decode().split("\0") if name)
+    digest = hashlib.sha256()
+    for name in names:
+        path = root / name
+        if path.is_file():
+            digest.update(name.encode())
+            digest.update(path.read_bytes())
+    target = cache_dir / f"cloudsim-{digest.hexdigest()[:16]}"
+    if (target / SUMS).is_file():
+        return target
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=cache_dir, prefix=".building-") as scratch:
+        with tarfile.open(Path(scratch) / SOURCE_TARBALL, "w:gz") as tar:
+            for name in names:
+                if (root / name).is_file():
+                    tar.add(root / name, arcname=name)
+        for argv in (
+            ["wheel", "--wheel-dir", scratch, str(root)],
+            ["download", "--no-deps", "--dest", scratch, "setuptools>=68", "wheel"],
+        ):
+            result = subprocess.run(
+                [python, "-m", "pip", *argv, "--quiet"],
+                capture_output=True,
+                text=True,
+                check=False,
+            )
+            if result.returncode != 0:
+                raise WheelhouseError(f"pip {argv[0]} failed: {result.stderr.strip()[-2000:]}")
+        for built in Path(scratch).glob("cloudsim-*.whl"):
+            built.unlink()  # CloudSim itself is installed from the source, in editable mode
+        sums = "".join(f"{_file_sha256(p)}  {p.name}\n" for p in sorted(Path(scratch).iterdir()))
+        (Path(scratch) / SUMS).write_text(sums)
+        shutil.rmtree(target, ignore_errors=True)
+        Path(scratch).rename(target)
+    return target
+
+
+def install_source_bundle(bundle: Path, root: str, venv: str) -> Action:
+    """Upload CloudSim's source and wheels; unpack and install it (editable) into venv, offline."""
+    remote = f"{REMOTE_ROOT}/{bundle.name}"
+    marker = f"{venv}/.cloudsim-installed-{bundle.name}"
+    wanted = _sums((bundle / SUMS).read_text())
+
+    def run(executor: SSHExecutor, target: Target) -> bool:
+        if executor.run(target, f"test -e {shlex.quote(marker)}", check=False).ok:
+            return False
+        executor.run(target, f"mkdir -p {shlex.quote(remote)}")
+        listing = executor.run(target, f"cd {shlex.quote(remote)} && sha256sum -- * || true")
+        present = _sums(listing.stdout)
+        for name, digest in sorted(wanted.items()):
+            if present.get(name) != digest:
+                executor.put_file(target, bundle / name, f"{remote}/{name}")
+        q_root, q_venv, q_remote = shlex.quote(root), shlex.quote(venv), shlex.quote(remote)
+        executor.run(
+            target,
+            f"rm -rf {q_root} && mkdir -p {q_root} && tar -xzf {q_remote}/{SOURCE_TARBALL} "
+            f"-C {q_root} && python3 -m venv {q_venv} && {q_venv}/bin/pip install --quiet "
+            f"--no-index --find-links {q_remote} -e {q_root} && touch {shlex.quote(marker)}",
+            timeout=900,
+        )
+        return True
+
+    return Action(f"install CloudSim from {bundle.name} into {venv}", run)
+
+
+def wait_for_port(port: int, seconds: int = 120) -> Action:
+    """Wait until something on the machine listens on a TCP port (a service finished starting)."""
+    probe = f"until (exec 3<>/dev/tcp/127.0.0.1/{port}) 2>/dev/null; do sleep 0.5; done"
+
+    def run(executor: SSHExecutor, target: Target) -> bool:
+        executor.run(
+            target, f"timeout {seconds} bash -c {shlex.quote(probe)}", timeout=seconds + 30
+        )
+        return False
+
+    return Action(f"wait for port {port}", run)

@@ -13,6 +13,7 @@ from flask import Flask
 
 from cloudsim.config import Config
 from cloudsim.extensions import db
+from cloudsim.fleet.providers import open_provider
 from cloudsim.models import Job
 from tests.conftest import running_app
 from tests.support.servers import wait_for
@@ -35,7 +36,19 @@ def fleet_config(make_config: Callable[..., Config]) -> Config:
 @pytest.fixture
 def fleet_app(fleet_config: Config) -> Iterator[Flask]:
     with running_app(fleet_config) as app:
-        yield app
+        try:
+            yield app
+        finally:
+            destroy_everything(fleet_config)
+
+
+def destroy_everything(config: Config) -> None:
+    """Remove every host and network a test made, even when it failed half-way."""
+    driver = open_provider("local", config).driver
+    for node in driver.list_nodes():
+        driver.destroy_node(node)
+    for network in driver.ex_list_networks():
+        driver.ex_destroy_network(network)
 
 
 @pytest.fixture
