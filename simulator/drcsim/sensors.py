@@ -36,6 +36,7 @@ class SensorSettings:
     camera_height: int = 240
     camera_fov_deg: float = 80.0
     camera_noise: float = 2.0  # intensity levels (0..255)
+    camera_stereo: bool = False  # adds a right image 7 cm to the right of the left one
     contact_hz: float = 100.0
     contact_noise: float = 0.5  # newtons
 
@@ -46,7 +47,11 @@ class SensorSettings:
         for key, value in values.items():
             if not hasattr(settings, key):
                 raise KeyError(f"unknown sensor setting {key!r}")
-            setattr(settings, key, type(getattr(settings, key))(value))
+            kind = type(getattr(settings, key))
+            if kind is bool:
+                setattr(settings, key, str(value).lower() in ("1", "true", "yes", "on"))
+            else:
+                setattr(settings, key, kind(value))
         return settings
 
 
@@ -149,10 +154,8 @@ class Sensors:
             "ranges": ranges.tobytes(),
         }
 
-    def _camera(self, rng: np.random.Generator, _: float) -> dict[str, Any]:
+    def _render(self, eye: np.ndarray, rotation: np.ndarray, rng: np.random.Generator) -> bytes:
         s = self.settings
-        origin, rotation = self._head_pose()
-        eye = origin + rotation @ np.array([0.14, 0.0, 0.08])
         forward, up = rotation[:, 0], rotation[:, 2]
         client = self.scene.client
         view = client.computeViewMatrix(eye.tolist(), (eye + forward).tolist(), up.tolist())
@@ -162,17 +165,24 @@ class Sensors:
         _, _, rgba, _, _ = client.getCameraImage(
             s.camera_width, s.camera_height, view, projection, renderer=pybullet.ER_TINY_RENDERER
         )
-        image = np.reshape(np.asarray(rgba, dtype=np.uint8), (s.camera_height, s.camera_width, 4))[
-            :, :, :3
-        ]
-        noisy = image + rng.normal(0.0, s.camera_noise, image.shape)
-        pixels = np.clip(noisy, 0, 255).astype(np.uint8)
-        return {
+        image = np.reshape(np.asarray(rgba, dtype=np.uint8), (s.camera_height, s.camera_width, 4))
+        noisy = image[:, :, :3] + rng.normal(0.0, s.camera_noise, (*image.shape[:2], 3))
+        return bytes(np.clip(noisy, 0, 255).astype(np.uint8).tobytes())
+
+    def _camera(self, rng: np.random.Generator, _: float) -> dict[str, Any]:
+        s = self.settings
+        origin, rotation = self._head_pose()
+        left = origin + rotation @ np.array([0.14, 0.035, 0.08])
+        message: dict[str, Any] = {
             "width": s.camera_width,
             "height": s.camera_height,
             "encoding": "rgb8",
-            "data": pixels.tobytes(),
+            "data": self._render(left, rotation, rng),
         }
+        if s.camera_stereo:
+            right = left - rotation[:, 1] * 0.07
+            message["right"] = self._render(right, rotation, rng)
+        return message
 
     def _contact(self, rng: np.random.Generator, _: float) -> dict[str, Any]:
         client, scene = self.scene.client, self.scene

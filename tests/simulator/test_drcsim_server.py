@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -74,6 +75,8 @@ def test_sensors_are_published_only_to_subscribers(server: ServerFactory) -> Non
         "camera_height=48",
         "--sensor",
         "lidar_beams=90",
+        "--sensor",
+        "camera_stereo=true",
     )
     with SimClient("127.0.0.1", port) as client:
         client.subscribe("imu", "camera", "lidar", "score")
@@ -84,7 +87,7 @@ def test_sensors_are_published_only_to_subscribers(server: ServerFactory) -> Non
             while (received := client.receive(0.05)) is not None:
                 seen.setdefault(received[0], received[1])
         assert {"imu", "camera", "lidar"} <= set(seen)
-        assert len(seen["camera"]["data"]) == 64 * 48 * 3
+        assert len(seen["camera"]["data"]) == len(seen["camera"]["right"]) == 64 * 48 * 3
         assert len(seen["lidar"]["ranges"]) == 90 * 4
         assert abs(seen["imu"]["linear_acceleration"][2] - 9.81) < 1.0
         assert "joint_states" not in seen and "contact" not in seen
@@ -109,3 +112,29 @@ def test_real_time_mode_advances_on_its_own_and_refuses_step(tmp_path: Path) -> 
         if process.poll() is None:
             process.terminate()
             process.wait(timeout=30)
+
+
+def test_a_real_time_run_stopped_by_sigterm_is_logged_and_replays(tmp_path: Path) -> None:
+    from drcsim.bench import start_server, wait_ready
+    from drcsim.replay import replay
+
+    process, port = start_server(
+        "vrc_task_2", "2", [], log_dir=tmp_path / "run", stderr=tmp_path / "server.log"
+    )
+    try:
+        wait_ready(port, process)
+        with SimClient("127.0.0.1", port) as client:
+            client.subscribe("clock")
+            client.behaviour("walk", pose=[2.0, 0.5, 0.0])
+            middle = client.wait_for("clock", lambda m: m["t"] >= 0.3)
+            client.joints(position={"l_arm_shx": -0.4})
+            client.wait_for("clock", lambda m: m["t"] >= middle["t"] + 0.5)
+        process.terminate()
+        assert process.wait(timeout=30) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait(timeout=30)
+    final = json.loads((tmp_path / "run" / "final.json").read_text())
+    assert final["end_reason"] == "closed" and final["step"] >= 800
+    assert replay(tmp_path / "run").final_digest == final["state_sha256"]
