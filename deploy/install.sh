@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Install what is missing: Debian packages, then a .venv with CloudSim (and the bundled
-# simulator) in editable mode. Fast and silent when nothing changed since the last run.
+# distributions in simulator/ and router/) in editable mode. Fast and silent when nothing changed since the last run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -30,8 +30,13 @@ if [ ${#missing[@]} -gt 0 ]; then
     [ "$made_policy" = 1 ] && rm -f "$policy"
 fi
 
+# The orchestrator, and the distributions it installs onto machines (for their tests).
+subprojects=()
+for sub in simulator router; do
+    [ -f "$sub/pyproject.toml" ] && subprojects+=("$sub")
+done
 manifests=(pyproject.toml)
-[ -f simulator/pyproject.toml ] && manifests+=(simulator/pyproject.toml)
+for sub in "${subprojects[@]}"; do manifests+=("$sub/pyproject.toml"); done
 digest=$(cat "${manifests[@]}" | sha256sum | cut -c1-16)
 if [ -x "$venv/bin/python" ] && [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$digest" ]; then
     exit 0
@@ -40,6 +45,6 @@ echo "install: creating $venv and installing CloudSim"
 [ -x "$venv/bin/python" ] || "$python" -m venv "$venv"
 "$venv/bin/pip" install -q --upgrade pip
 targets=(-e ".[dev]")
-[ -f simulator/pyproject.toml ] && targets+=(-e ./simulator)
+for sub in "${subprojects[@]}"; do targets+=(-e "./$sub"); done
 "$venv/bin/pip" install -q "${targets[@]}"
 echo "$digest" >"$stamp"
