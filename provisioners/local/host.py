@@ -27,6 +27,7 @@ KEEP_ENABLED_UNITS = frozenset({"ssh.service", "sshd.service", "ssh.socket"})
 # nspawn would start a getty on its (passive) console: nobody logs in there.
 ALWAYS_MASKED_UNITS = ("console-getty.service",)
 MASKABLE_SUFFIXES = (".service", ".timer", ".path", ".socket")
+LAUNCH_SECONDS = 30.0
 LAUNCHER_EXIT_SECONDS = 5.0
 KILL_WAIT_SECONDS = 10.0
 POLL_SECONDS = 0.05
@@ -312,14 +313,18 @@ def start_host(spec: HostSpec, timeout: float) -> HostProcesses:
         hide_paths(upper, spec.hidden_paths)
     masked = units_to_mask() if spec.init == INIT_SYSTEMD else []
     with open(spec.boot_log, "ab") as log:
-        subprocess.run(
-            launch_command(spec, masked),
-            stdin=subprocess.DEVNULL,
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            check=True,
-            timeout=timeout,
-        )
+        try:
+            # Returns at once: setsid -f forks the launcher off and exits.
+            subprocess.run(
+                launch_command(spec, masked),
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                check=True,
+                timeout=LAUNCH_SECONDS,
+            )
+        except (OSError, subprocess.SubprocessError) as error:
+            raise HostBootError(f"host {spec.hostname}: cannot launch: {error}") from error
     deadline = time.monotonic() + timeout
     launcher = _wait_for_launcher(spec, deadline)
     while True:
