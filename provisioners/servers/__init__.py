@@ -4,9 +4,12 @@ An inventory lists the servers (address, SSH login, LAN and its CIDR). Networks 
 inventory's pre-made LANs: ex_create_network hands out one whose servers are all free.
 create_node claims a free server of that LAN and, over SSH with the inventory's key, sets
 its hostname to the node's name and installs the node's public key; destroy_node removes
-what CloudSim put there (keys, firewall chains, /opt/drcsim, /opt/cloudsim) and frees it.
-Claims live in a JSON file under state_dir, so any later driver rediscovers them. Modules:
-driver (the libcloud API), inventory, claims (choosing servers), remote (the SSH work), state.
+what CloudSim put there (keys, firewall chains, /opt/drcsim, /opt/cloudsim), puts back the
+server's /etc/hosts, /etc/motd and default route, gives it back its name as hostname and
+frees it. A server that cannot be cleaned up is freed anyway (terminate must finish) with a
+warning in the state, and is cleaned before its next claim. Claims live in a JSON file under
+state_dir, so any later driver rediscovers them. See README.md; modules: driver (the
+libcloud API), inventory, claims (choosing servers), remote (the SSH work), state.
 """
 
 from typing import cast

@@ -285,6 +285,32 @@ class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
                 )
         return True
 
+    def ex_clean_up_released(self) -> dict[str, str]:
+        """Retry the cleanup of free servers released without one; return those still pending."""
+        pending = self._state.read().pending_cleanups
+        still: dict[str, str] = {}
+        for name, cleanup in sorted(pending.items()):
+            server = self.inventory.server(name)
+            if server is None:
+                still[name] = cleanup.warning
+                continue
+            try:
+                with self._executor(server) as executor:
+                    remote.clean_up(executor, server, cleanup.public_keys)
+            except SSHError as error:
+                still[name] = f"server {name} is still not cleaned up: {error}"
+                log.warning("%s", still[name])
+            with self._state.transaction() as state:
+                current = state.pending_cleanups.get(name)
+                # Claimed again meanwhile: that claim cleans up before it prepares.
+                if current is None or name in state.claims:
+                    continue
+                if name in still:
+                    current.warning = still[name]
+                else:
+                    del state.pending_cleanups[name]
+        return still
+
     def list_nodes(self) -> list[Node]:
         """Return a node per claimed server, rediscovered from state_dir."""
         claims = self._state.read().claims.values()
@@ -407,7 +433,10 @@ class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
             "tags": dict(claim.tags),
             "status": claim.status,
             "error": claim.error,
+            # How the provider itself logs in; the engine reaches nodes by their addresses.
             "ssh_user": server.user if server else None,
+            "ssh_address": server.address if server else None,
+            "ssh_port": server.port if server else None,
             "capabilities": sorted(server.capabilities) if server else [],
         }
         if server is not None and server.proxy_command:

@@ -152,6 +152,7 @@ def test_an_unreachable_server_is_released_and_cleaned_before_its_next_claim(
     assert status["status"] == "free"
     assert "released without cleanup" in status["warning"]
     assert ssh.can_log_in(*on(node), first), "nothing could have been cleaned"
+    assert list(unreachable.ex_clean_up_released()) == ["srv-b"]
 
     second = make_key_pair("constellation c4")
     (node,) = claim(driver, "c3", second, {"sim": False}).values()
@@ -160,7 +161,13 @@ def test_an_unreachable_server_is_released_and_cleaned_before_its_next_claim(
     # the earlier node's leftovers are gone; the server's originals are kept while claimed
     assert ssh.check(*on(node), lab.login, LEFTOVERS) == "/var/lib/cloudsim-servers\n"
     assert [s["warning"] for s in driver.ex_list_servers()] == [None, None]
-    assert driver.destroy_node(node) and driver.ex_destroy_network("c3")
+
+    ssh.check(*on(node), second, DEPLOYED)
+    assert unreachable.destroy_node(node) and unreachable.ex_destroy_network("c3")
+    assert driver.ex_clean_up_released() == {}
+    assert [s["warning"] for s in driver.ex_list_servers()] == [None, None]
+    assert not ssh.can_log_in(*on(node), second)
+    assert ssh.check(*on(node), lab.login, LEFTOVERS) == ""
 
 
 def test_a_server_that_refuses_the_login_key_fails_its_claim(lab: Lab, state_dir: Path) -> None:
