@@ -25,7 +25,7 @@ from provisioners.ssh import Machine as Target
 from provisioners.ssh import SSHExecutor
 
 FORWARD_CHAIN = "CLOUDSIM-FWD"
-OCU_CHAIN = "CLOUDSIM-OCU"  # mangle: OCU<->LAN packets to csrouter's queues
+OCU_CHAIN = "CLOUDSIM-OCU"  # raw and mangle: OCU<->LAN packets to csrouter's queues
 VPN_DEVICE = "tun-ocu"
 VPN_INSTANCE = "cloudsim"
 VPN_SERVICE = f"openvpn-server@{VPN_INSTANCE}"
@@ -77,23 +77,29 @@ def vpn_firewall(ctx: PlanContext, vpn: VpnMaterial) -> list[PlanItem]:
 
 def ocu_queues(ctx: PlanContext) -> list[PlanItem]:
     """Send OCU<->LAN packets to csrouter; without a reader the kernel drops them."""
+    rules = queue_rules(ctx.subnet)
     return [
-        iptables_chain(OCU_CHAIN, table="mangle"),
+        *(iptables_chain(OCU_CHAIN, table=table) for table in sorted({t for t, _, _ in rules})),
         *(
-            iptables_rule(chain, rule, table="mangle", insert=chain == "FORWARD")
-            for chain, rule in queue_rules(ctx.subnet)
+            iptables_rule(chain, rule, table=table, insert=chain != OCU_CHAIN)
+            for table, chain, rule in rules
         ),
     ]
 
 
-def queue_rules(lan_subnet: str) -> list[tuple[str, list[str]]]:
-    """Return csrouter's NFQUEUE rules (the same the daemon checks and restores)."""
+def queue_rules(lan_subnet: str) -> list[tuple[str, str, list[str]]]:
+    """Return csrouter's NFQUEUE rules as (table, chain, rule): the same the daemon restores.
+
+    Uplink is queued before connection tracking (raw), downlink after un-masquerading
+    (mangle FORWARD); router/csrouter/rules.py says why.
+    """
     uplink = ["-j", "NFQUEUE", "--queue-num", str(UPLINK_QUEUE)]
     downlink = ["-j", "NFQUEUE", "--queue-num", str(DOWNLINK_QUEUE)]
     return [
-        (OCU_CHAIN, ["-i", VPN_DEVICE, "-d", lan_subnet, *uplink]),
-        (OCU_CHAIN, ["-s", lan_subnet, "-o", VPN_DEVICE, *downlink]),
-        ("FORWARD", ["-j", OCU_CHAIN]),
+        ("raw", OCU_CHAIN, ["-i", VPN_DEVICE, "-d", lan_subnet, *uplink]),
+        ("raw", "PREROUTING", ["-j", OCU_CHAIN]),
+        ("mangle", OCU_CHAIN, ["-s", lan_subnet, "-o", VPN_DEVICE, *downlink]),
+        ("mangle", "FORWARD", ["-j", OCU_CHAIN]),
     ]
 
 

@@ -24,11 +24,14 @@ from csrouter.run import DOWNLINK, UPLINK
 
 log = logging.getLogger("csrouter")
 SOCKET_BUFFER_BYTES = 8 * 1024 * 1024
+# above ordinary processes, so a busy machine does not add its scheduling delay to the latency
+REALTIME_PRIORITY = 20
 
 
 def serve(config: RouterConfig) -> int:
     """Run the daemon until SIGTERM/SIGINT; return the exit status."""
     path = OcuPath(config)
+    _realtime()
     for added in ensure_rules(config):
         log.warning("added missing rule: iptables -t mangle %s", added)
     queues = {
@@ -52,6 +55,13 @@ def serve(config: RouterConfig) -> int:
         path.save_on_exit()
     log.info("stopped; %d packets dropped while stopping", path.dropped_while_stopping)
     return 0
+
+
+def _realtime() -> None:
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(REALTIME_PRIORITY))
+    except OSError as exc:
+        log.warning("no real-time priority (%s): the latency may jitter under load", exc)
 
 
 def _bind(number: int, max_len: int, path: OcuPath, direction: str) -> NetfilterQueue:

@@ -3,72 +3,87 @@
 They have no --queue-bypass on purpose: while no process listens on a queue the kernel
 drops its packets, so OCU traffic stops instead of flowing undelayed and uncounted. The
 daemon adds missing rules when it starts and never removes them.
+
+Uplink packets are queued in raw/PREROUTING, before connection tracking: a packet held
+after conntrack saw it leaves an unconfirmed entry, and a second packet of the same flow
+arriving meanwhile (a ping a second, with 250 ms each way) then clashes with it and is
+dropped when released. Downlink packets are queued in mangle/FORWARD, after the router has
+undone its masquerading, so replies to the OCU are matched by their real destination.
 """
 
 from __future__ import annotations
 
 import shlex
 import subprocess
+from dataclasses import dataclass
 
 from csrouter.config import RouterConfig
 from csrouter.errors import RulesError
 
-TABLE = "mangle"
 CHAIN = "CLOUDSIM-OCU"
 XTABLES_WAIT_SECONDS = 10
 
 
-def queue_rules(config: RouterConfig) -> list[tuple[str, list[str]]]:
-    """Return (chain, rule argv) for every rule, the chain's own rules first."""
+@dataclass(frozen=True)
+class Rule:
+    """One iptables rule: table, chain and the arguments after the chain."""
+
+    table: str
+    chain: str
+    args: tuple[str, ...]
+
+    def describe(self) -> str:
+        """Return the rule as `-t TABLE -A CHAIN ARGS`."""
+        return f"-t {self.table} -A {self.chain} {shlex.join(self.args)}"
+
+
+def queue_rules(config: RouterConfig) -> list[Rule]:
+    """Return every rule, each table's own chain before the jump into it."""
     device, lan = config.vpn_device, config.lan_subnet
-    uplink = ["-j", "NFQUEUE", "--queue-num", str(config.uplink_queue)]
-    downlink = ["-j", "NFQUEUE", "--queue-num", str(config.downlink_queue)]
+    uplink = ("-j", "NFQUEUE", "--queue-num", str(config.uplink_queue))
+    downlink = ("-j", "NFQUEUE", "--queue-num", str(config.downlink_queue))
     return [
-        (CHAIN, ["-i", device, "-d", lan, *uplink]),
-        (CHAIN, ["-s", lan, "-o", device, *downlink]),
-        ("FORWARD", ["-j", CHAIN]),
+        Rule("raw", CHAIN, ("-i", device, "-d", lan, *uplink)),
+        Rule("raw", "PREROUTING", ("-j", CHAIN)),
+        Rule("mangle", CHAIN, ("-s", lan, "-o", device, *downlink)),
+        Rule("mangle", "FORWARD", ("-j", CHAIN)),
     ]
 
 
-def _iptables(*args: str) -> subprocess.CompletedProcess[str]:
-    command = ["iptables", "-w", str(XTABLES_WAIT_SECONDS), "-t", TABLE, *args]
+def _iptables(table: str, *args: str) -> subprocess.CompletedProcess[str]:
+    command = ["iptables", "-w", str(XTABLES_WAIT_SECONDS), "-t", table, *args]
     try:
         return subprocess.run(command, capture_output=True, text=True, check=False, timeout=30)
     except (OSError, subprocess.TimeoutExpired) as exc:
         raise RulesError(f"{shlex.join(command)} failed: {exc}") from exc
 
 
-def _chain_exists() -> bool:
-    return _iptables("-S", CHAIN).returncode == 0
+def _present(rule: Rule) -> bool:
+    return _iptables(rule.table, "-C", rule.chain, *rule.args).returncode == 0
 
 
 def missing_rules(config: RouterConfig) -> list[str]:
-    """Return the rules that are not in place, as iptables arguments (empty = all there)."""
-    if not _chain_exists():
-        return [f"-N {CHAIN}"] + [f"-A {c} {shlex.join(r)}" for c, r in queue_rules(config)]
-    return [
-        f"-A {chain} {shlex.join(rule)}"
-        for chain, rule in queue_rules(config)
-        if _iptables("-C", chain, *rule).returncode != 0
-    ]
+    """Return the rules that are not in place (empty = all there)."""
+    return [rule.describe() for rule in queue_rules(config) if not _present(rule)]
 
 
 def ensure_rules(config: RouterConfig) -> list[str]:
-    """Add whatever rule is missing; return what was added."""
+    """Add whatever rule (or chain) is missing; return what was added."""
     added: list[str] = []
-    if not _chain_exists():
-        _checked(_iptables("-N", CHAIN))
-        added.append(f"-N {CHAIN}")
-    for chain, rule in queue_rules(config):
-        if _iptables("-C", chain, *rule).returncode == 0:
+    for table in sorted({rule.table for rule in queue_rules(config)}):
+        if _iptables(table, "-S", CHAIN).returncode != 0:
+            _checked(_iptables(table, "-N", CHAIN))
+            added.append(f"-t {table} -N {CHAIN}")
+    for rule in queue_rules(config):
+        if _present(rule):
             continue
-        # the jump goes first so no earlier mangle rule can let OCU packets skip the queues
-        where = ["-I", chain, "1"] if chain == "FORWARD" else ["-A", chain]
-        _checked(_iptables(*where, *rule))
-        added.append(f"{where[0]} {chain} {shlex.join(rule)}")
+        # jumps go first so no earlier rule lets OCU packets skip the queues
+        where = ["-A", rule.chain] if rule.chain == CHAIN else ["-I", rule.chain, "1"]
+        _checked(_iptables(rule.table, *where, *rule.args))
+        added.append(rule.describe())
     return added
 
 
 def _checked(result: subprocess.CompletedProcess[str]) -> None:
     if result.returncode != 0:
-        raise RulesError(f"iptables {shlex.join(result.args[1:])}: {result.stderr.strip()}")
+        raise RulesError(f"{shlex.join(result.args)}: {result.stderr.strip()}")

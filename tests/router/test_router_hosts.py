@@ -23,11 +23,11 @@ def test_applying_the_router_plan_again_changes_nothing(lab: RouterLab) -> None:
 
 def test_round_trip_is_twice_the_latency(lab: RouterLab) -> None:
     lab.csrouter("arm", "--latency-ms", str(LATENCY_MS), "--run-id", "rtt")
-    result = lab.ping("ocu", lab.ip("sim"), count=10, wait=3)
-    assert result.ok, result.stderr
-    summary = re.findall(r"= ([\d.]+)/([\d.]+)/([\d.]+)", result.stdout)[0]
-    rtt_min, rtt_avg = float(summary[0]), float(summary[1])
-    assert 2 * LATENCY_MS <= rtt_min and rtt_avg <= 2 * LATENCY_MS + 5, result.stdout
+    result = lab.result("ocu", f"ping -n -c 10 -i 0.2 -W 3 {lab.ip('sim')}", timeout=30)
+    assert " 0% packet loss" in result.stdout, result.stdout
+    rtts = sorted(float(ms) for ms in re.findall(r"time=([\d.]+) ms", result.stdout))
+    # the median: one echo delayed by the loaded, shared test machine is not the router's doing
+    assert 2 * LATENCY_MS <= rtts[0] and rtts[len(rtts) // 2] <= 2 * LATENCY_MS + 5, rtts
 
 
 def test_uplink_udp_payload_is_counted_exactly(lab: RouterLab) -> None:
