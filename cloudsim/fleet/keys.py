@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import secrets
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from cryptography.hazmat.primitives import serialization
@@ -43,53 +44,53 @@ def generate_keypair(comment: str) -> KeyPair:
     return KeyPair(private, f"{public} {comment}")
 
 
-def constellation_keypair(constellation: Constellation) -> KeyPair:
-    """Return the constellation's SSH key pair, making and storing it the first time."""
+def constellation_secret(
+    constellation: Constellation, name: str, kind: SecretKind, make: Callable[[], str]
+) -> str:
+    """Return a secret of the constellation, making (with `make`) and storing it the first time."""
     secret = db.session.scalar(
         select(Secret).where(
             Secret.owner_type == "constellation",
             Secret.owner_id == constellation.id,
-            Secret.name == SSH_KEY_NAME,
+            Secret.name == name,
         )
     )
     if secret is None:
-        pair = generate_keypair(f"cloudsim-{constellation.name}")
         secret = Secret(
-            kind=SecretKind.SSH_PRIVATE_KEY,
+            kind=kind,
             owner_type="constellation",
             owner_id=constellation.id,
-            name=SSH_KEY_NAME,
-            value=pair.private,
+            name=name,
+            value=make(),
         )
         db.session.add(secret)
         db.session.commit()
-        return pair
-    private = serialization.load_ssh_private_key(secret.value.encode(), password=None)
+    return secret.value
+
+
+def constellation_keypair(constellation: Constellation) -> KeyPair:
+    """Return the constellation's SSH key pair, making and storing it the first time."""
+    comment = f"cloudsim-{constellation.name}"
+    private_text = constellation_secret(
+        constellation,
+        SSH_KEY_NAME,
+        SecretKind.SSH_PRIVATE_KEY,
+        lambda: generate_keypair(comment).private,
+    )
+    private = serialization.load_ssh_private_key(private_text.encode(), password=None)
     public = (
         private.public_key()
         .public_bytes(serialization.Encoding.OpenSSH, serialization.PublicFormat.OpenSSH)
         .decode()
     )
-    return KeyPair(secret.value, f"{public} cloudsim-{constellation.name}")
+    return KeyPair(private_text, f"{public} {comment}")
 
 
 def instance_admin_password(constellation: Constellation) -> str:
     """Return the admin password of the CloudSim a `cloudsim` constellation runs (made once)."""
-    secret = db.session.scalar(
-        select(Secret).where(
-            Secret.owner_type == "constellation",
-            Secret.owner_id == constellation.id,
-            Secret.name == INSTANCE_ADMIN_PASSWORD,
-        )
+    return constellation_secret(
+        constellation,
+        INSTANCE_ADMIN_PASSWORD,
+        SecretKind.CLOUD_CREDENTIALS,
+        lambda: secrets.token_urlsafe(18),
     )
-    if secret is None:
-        secret = Secret(
-            kind=SecretKind.CLOUD_CREDENTIALS,
-            owner_type="constellation",
-            owner_id=constellation.id,
-            name=INSTANCE_ADMIN_PASSWORD,
-            value=secrets.token_urlsafe(18),
-        )
-        db.session.add(secret)
-        db.session.commit()
-    return secret.value

@@ -78,33 +78,41 @@ def _sums(text: str) -> dict[str, str]:
     return {name: digest for digest, name in pairs}
 
 
-def install_wheelhouse(wheelhouse: Path, venv: str, requirement: str) -> Action:
-    """Upload the wheels the machine lacks and install `requirement` into `venv`, offline."""
-    remote = f"{REMOTE_ROOT}/{wheelhouse.name}"
-    marker = f"{venv}/.cloudsim-installed-{wheelhouse.name}"
-    wanted = _sums((wheelhouse / SUMS).read_text())
+def _offline_install(folder: Path, venv: str, description: str, install: str) -> Action:
+    """Upload the files of `folder` the machine lacks, then run `install` once (marked in venv).
+
+    In `install`, {remote} is the folder's path on the machine.
+    """
+    remote = f"{REMOTE_ROOT}/{folder.name}"
+    marker = f"{venv}/.cloudsim-installed-{folder.name}"
+    wanted = _sums((folder / SUMS).read_text())
 
     def run(executor: SSHExecutor, target: Target) -> bool:
         if executor.run(target, f"test -e {shlex.quote(marker)}", check=False).ok:
             return False
         executor.run(target, f"mkdir -p {shlex.quote(remote)}")
-        listing = executor.run(
-            target, f"cd {shlex.quote(remote)} && sha256sum -- *.whl 2>/dev/null || true"
-        )
+        listing = executor.run(target, f"cd {shlex.quote(remote)} && sha256sum -- * || true")
         present = _sums(listing.stdout)
         for name, digest in sorted(wanted.items()):
             if present.get(name) != digest:
-                executor.put_file(target, wheelhouse / name, f"{remote}/{name}")
-        executor.run(
-            target,
-            f"python3 -m venv {shlex.quote(venv)} && "
-            f"{shlex.quote(venv)}/bin/pip install --quiet --no-index --find-links "
-            f"{shlex.quote(remote)} {shlex.quote(requirement)} && touch {shlex.quote(marker)}",
-            timeout=900,
-        )
+                executor.put_file(target, folder / name, f"{remote}/{name}")
+        command = install.format(remote=shlex.quote(remote))
+        executor.run(target, f"{command} && touch {shlex.quote(marker)}", timeout=900)
         return True
 
-    return Action(f"install {requirement} from {wheelhouse.name} into {venv}", run)
+    return Action(description, run)
+
+
+def install_wheelhouse(wheelhouse: Path, venv: str, requirement: str) -> Action:
+    """Upload the wheels the machine lacks and install `requirement` into `venv`, offline."""
+    q_venv = shlex.quote(venv)
+    return _offline_install(
+        wheelhouse,
+        venv,
+        f"install {requirement} from {wheelhouse.name} into {venv}",
+        f"python3 -m venv {q_venv} && {q_venv}/bin/pip install --quiet --no-index "
+        f"--find-links {{remote}} {shlex.quote(requirement)}",
+    )
 
 
 def build_source_bundle(root: Path, cache_dir: Path, python: str) -> Path:
@@ -154,30 +162,15 @@ def build_source_bundle(root: Path, cache_dir: Path, python: str) -> Path:
 
 def install_source_bundle(bundle: Path, root: str, venv: str) -> Action:
     """Upload CloudSim's source and wheels; unpack and install it (editable) into venv, offline."""
-    remote = f"{REMOTE_ROOT}/{bundle.name}"
-    marker = f"{venv}/.cloudsim-installed-{bundle.name}"
-    wanted = _sums((bundle / SUMS).read_text())
-
-    def run(executor: SSHExecutor, target: Target) -> bool:
-        if executor.run(target, f"test -e {shlex.quote(marker)}", check=False).ok:
-            return False
-        executor.run(target, f"mkdir -p {shlex.quote(remote)}")
-        listing = executor.run(target, f"cd {shlex.quote(remote)} && sha256sum -- * || true")
-        present = _sums(listing.stdout)
-        for name, digest in sorted(wanted.items()):
-            if present.get(name) != digest:
-                executor.put_file(target, bundle / name, f"{remote}/{name}")
-        q_root, q_venv, q_remote = shlex.quote(root), shlex.quote(venv), shlex.quote(remote)
-        executor.run(
-            target,
-            f"rm -rf {q_root} && mkdir -p {q_root} && tar -xzf {q_remote}/{SOURCE_TARBALL} "
-            f"-C {q_root} && python3 -m venv {q_venv} && {q_venv}/bin/pip install --quiet "
-            f"--no-index --find-links {q_remote} -e {q_root} && touch {shlex.quote(marker)}",
-            timeout=900,
-        )
-        return True
-
-    return Action(f"install CloudSim from {bundle.name} into {venv}", run)
+    q_root, q_venv = shlex.quote(root), shlex.quote(venv)
+    return _offline_install(
+        bundle,
+        venv,
+        f"install CloudSim from {bundle.name} into {venv}",
+        f"rm -rf {q_root} && mkdir -p {q_root} && tar -xzf {{remote}}/{SOURCE_TARBALL} "
+        f"-C {q_root} && python3 -m venv {q_venv} && {q_venv}/bin/pip install --quiet "
+        f"--no-index --find-links {{remote}} -e {q_root}",
+    )
 
 
 def wait_for_port(port: int, seconds: int = 120) -> Action:

@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import os
-import signal
-import subprocess
-import sys
 from collections.abc import Callable, Iterator
 from datetime import timedelta
 from pathlib import Path
@@ -21,6 +18,7 @@ from cloudsim.models import Job, JobState, User, utcnow
 from tests.conftest import log_in, running_app
 from tests.support import job_kinds
 from tests.support.servers import wait_for
+from tests.support.workers import kill_worker, worker_process
 
 PROJECT = Path(__file__).resolve().parents[2]
 
@@ -148,64 +146,19 @@ def test_job_page_follows_progress_and_log(
     assert tail["log"] == full["log"][-5:]
 
 
-def _worker_process(config: Config) -> subprocess.Popen[bytes]:
-    env = dict(
-        os.environ,
-        CLOUDSIM_INSTANCE_DIR=str(config.instance_dir),
-        CLOUDSIM_DATABASE_URL=config.database_url,
-        CLOUDSIM_REDIS_URL=config.effective_redis_url,
-        CLOUDSIM_ENCRYPTION_KEYS=",".join(config.encryption_keys),
-        CLOUDSIM_SECRET_KEY=config.secret_key,
-        CLOUDSIM_JOB_LEASE_SECONDS="2",
-        PYTHONPATH=str(PROJECT),
-    )
-    return subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "celery",
-            "-A",
-            "tests.support.worker_app",
-            "worker",
-            "--pool",
-            "prefork",
-            "--concurrency",
-            "1",
-            "--loglevel",
-            "WARNING",
-            "--queues",
-            "cloudsim",
-            "--without-mingle",
-            "--without-gossip",
-        ],
-        env=env,
-        cwd=PROJECT,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-
-
-def _process_tree(pid: int) -> list[int]:
-    children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
-    return [pid] + [p for c in children for p in _process_tree(int(c))]
-
-
 def test_killing_the_worker_mid_job_loses_nothing(
     make_config: Callable[..., Config], markers: Path
 ) -> None:
     config = make_config(job_lease_seconds=2)
     with running_app(config) as app:
-        process = _worker_process(config)
+        process = worker_process(config)
         try:
             job = enqueue(
                 "test.slow", None, params={"marker_dir": str(markers), "steps": 6, "seconds": 0.4}
             )
             wait_for(lambda: (markers / "attempt-1").exists(), 60, "the first attempt")
-            for pid in _process_tree(process.pid):
-                os.kill(pid, signal.SIGKILL)
         finally:
-            process.kill()
-            process.wait()
+            kill_worker(process)
         db.session.expire_all()
         assert db.session.get(Job, job.id).state == JobState.RUNNING
         wait_for(lambda: lost_jobs(), 10, "the dead worker's lease to expire")

@@ -1,0 +1,59 @@
+"""A Celery worker in a process of its own, to be killed the way a crash kills one."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+from cloudsim.config import Config
+
+PROJECT = Path(__file__).resolve().parents[2]
+
+
+def worker_process(config: Config) -> subprocess.Popen[bytes]:
+    """Start a prefork worker (one pool process) on the config's database and Redis."""
+    env = dict(
+        os.environ,
+        CLOUDSIM_INSTANCE_DIR=str(config.instance_dir),
+        CLOUDSIM_DATABASE_URL=config.database_url,
+        CLOUDSIM_REDIS_URL=config.effective_redis_url,
+        CLOUDSIM_ENCRYPTION_KEYS=",".join(config.encryption_keys),
+        CLOUDSIM_SECRET_KEY=config.secret_key,
+        CLOUDSIM_JOB_LEASE_SECONDS=str(config.job_lease_seconds),
+        CLOUDSIM_LOCAL_PREFIX=config.local_prefix,
+        CLOUDSIM_LOCAL_SUBNET_POOL=config.local_subnet_pool,
+        CLOUDSIM_LOCAL_PUBLIC_CIDR=config.local_public_cidr,
+        PYTHONPATH=str(PROJECT),
+    )
+    argv = [
+        sys.executable,
+        "-m",
+        "celery",
+        "-A",
+        "tests.support.worker_app",
+        "worker",
+        "--pool",
+        "prefork",
+        "--concurrency",
+        "1",
+        "--loglevel",
+        "WARNING",
+        "--queues",
+        "cloudsim",
+        "--without-mingle",
+        "--without-gossip",
+    ]
+    return subprocess.Popen(
+        argv, env=env, cwd=PROJECT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
+
+
+def kill_worker(process: subprocess.Popen[bytes]) -> None:
+    """SIGKILL the worker and its pool processes (not what they started, e.g. hosts)."""
+    children = Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split()
+    for pid in [process.pid, *map(int, children)]:
+        os.kill(pid, signal.SIGKILL)
+    process.wait()
