@@ -4,8 +4,8 @@ An inventory lists the servers (address, SSH login, LAN and its CIDR). Networks 
 inventory's pre-made LANs: ex_create_network hands out one whose servers are all free.
 create_node claims a free server of that LAN and, over SSH with the inventory's key, sets
 its hostname to the node's name and installs the node's public key; destroy_node removes
-what CloudSim put there (keys, firewall chains, /opt/drcsim, /opt/cloudsim), puts back the
-server's /etc/hosts, /etc/motd and default route, gives it back its name as hostname and
+what CloudSim put there (keys, services, CLOUDSIM-* chains, its files), puts back the
+server's /etc/hosts, /etc/motd, default route, firewall and ip_forward, its own hostname, and
 frees it. A server that cannot be cleaned up is freed anyway (terminate must finish) with a
 warning in the state, and is cleaned before its next claim. Claims live in a JSON file under
 state_dir, so any later driver rediscovers them. See README.md; modules: driver (the

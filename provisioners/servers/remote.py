@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import itertools
 import shlex
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
 from provisioners.facts.iptables import iptables_prefix
 from provisioners.operations.sysctl import DEFAULT_PERSIST_PATH
@@ -13,14 +13,30 @@ from provisioners.servers.inventory import Server
 from provisioners.ssh import Machine, SSHExecutor
 
 # What CloudSim's deploy plans put on a machine (constellations/plans: common, router, roles,
-# software); tests check these lists against the plans' own constants.
-CLOUDSIM_CHAINS = ("CLOUDSIM-IN", "CLOUDSIM-FWD")
-CLOUDSIM_PATHS = ("/opt/drcsim", "/opt/cloudsim", DEFAULT_PERSIST_PATH)
-# The server's own versions of what deploy plans overwrite, kept on the server while claimed.
+# software); tests check these against the plans' own constants.
+CHAIN_PREFIX = "CLOUDSIM-"
+IPTABLES_TABLES = ("filter", "nat", "mangle", "raw")
+SERVICES = ("cloudsim.service", "csrouter.service", "openvpn-server@cloudsim.service")
+CLOUDSIM_PATHS = (
+    "/opt/drcsim",
+    "/opt/cloudsim",
+    "/opt/csrouter",
+    "/usr/local/sbin/csrouter",
+    "/etc/cloudsim",
+    "/var/lib/cloudsim",
+    "/etc/openvpn/server/cloudsim",
+    "/etc/openvpn/server/cloudsim.conf",
+    "/etc/systemd/system/cloudsim.service",
+    "/etc/systemd/system/csrouter.service",
+    "/etc/systemd/system/openvpn-server@cloudsim.service.d",
+    DEFAULT_PERSIST_PATH,
+)
+SYSCTL_KEYS = ("net.ipv4.ip_forward",)
+# The server's own state, saved at the first prepare of a claim and put back on release.
 WORK_DIR = "/var/lib/cloudsim-servers"
 ORIGINALS_DIR = f"{WORK_DIR}/original"
 RESTORED_FILES = ("/etc/hosts", "/etc/motd")
-COMMAND_TIMEOUT_SECONDS = 60.0
+COMMAND_TIMEOUT_SECONDS = 120.0
 _JUMP_OPTIONS = ("-j", "--jump", "-g", "--goto")
 _KEY_TYPES = ("ssh-", "ecdsa-", "sk-")
 
@@ -65,8 +81,22 @@ if [ ! -d "$originals" ]; then
   if command -v ip > /dev/null 2>&1; then
     ip -4 route show default > "$originals.partial/default-route"
   fi
+  if command -v iptables-save > /dev/null 2>&1; then
+    iptables-save > "$originals.partial/iptables"
+  fi
+  for key in {sysctl_keys}; do
+    printf '%s=%s\\n' "$key" "$(sysctl -n "$key")"
+  done > "$originals.partial/sysctl"
   mv "$originals.partial" "$originals"
 fi
+"""
+_STOP_SERVICES = """if [ -d /run/systemd/system ]; then
+  for unit in {units}; do
+    if systemctl cat -- "$unit" > /dev/null 2>&1; then systemctl disable --now -- "$unit"; fi
+  done
+fi
+"""
+_RELOAD_SYSTEMD = """if [ -d /run/systemd/system ]; then systemctl daemon-reload; fi
 """
 _RESTORE_ORIGINALS = """originals={originals}
 if [ -d "$originals" ]; then
@@ -83,11 +113,18 @@ if [ -d "$originals" ]; then
       if [ -n "$route" ]; then ip -4 route add $route; fi
     done < "$routes"
   fi
+  if [ -f "$originals/iptables" ]; then
+    # iptables-save leaves out tables that had no rules: those are emptied instead
+    for table in {tables}; do
+      if ! grep -qxF -- "*$table" "$originals/iptables"; then
+        iptables -w 10 -t "$table" -F
+        iptables -w 10 -t "$table" -X
+      fi
+    done
+    iptables-restore -w 10 < "$originals/iptables"
+  fi
+  while read -r setting; do sysctl -q -w "$setting"; done < "$originals/sysctl"
   rm -rf {work_dir}
-fi
-"""
-_LIST_FILTER_RULES = f"""if command -v iptables > /dev/null 2>&1; then
-  {iptables_prefix("filter", False)} -S
 fi
 """
 
@@ -124,38 +161,67 @@ def prepare_script(
     if blob != server.login_key_blob:  # the login key is there already and must stay
         script += _ADD_KEY.format(blob=shlex.quote(blob), line=shlex.quote(public_key.strip()))
     script += _SAVE_ORIGINALS.format(
-        originals=shlex.quote(ORIGINALS_DIR), files=shlex.join(RESTORED_FILES)
+        originals=shlex.quote(ORIGINALS_DIR),
+        files=shlex.join(RESTORED_FILES),
+        sysctl_keys=shlex.join(SYSCTL_KEYS),
     )
     return script + _SET_HOSTNAME.format(hostname=shlex.quote(hostname))
 
 
-def cleanup_script(server: Server, public_keys: Sequence[str], filter_rules: str) -> str:
-    """Return the script that removes CloudSim's keys, chains and files, restores the originals."""
+def cleanup_script(server: Server, public_keys: Sequence[str], rules: Mapping[str, str]) -> str:
+    """Return the script that removes CloudSim's keys, services, chains and files.
+
+    It then restores the server's saved files, default route, firewall and kernel
+    parameters and gives the server back its own name. rules: `iptables -S` per table.
+    """
     script = _FIND_KEYS.format(user=shlex.quote(server.user))
     blobs = _removable_blobs(server, public_keys)
     if blobs:
         script += _REMOVE_KEYS.format(blobs=shlex.quote(" ".join(blobs)))
-    script += "".join(f"{command}\n" for command in iptables_cleanup(filter_rules))
-    script += f"rm -rf -- {shlex.join(CLOUDSIM_PATHS)}\n"
+    script += _STOP_SERVICES.format(units=shlex.join(SERVICES))
+    for table, listing in rules.items():
+        script += "".join(f"{command}\n" for command in iptables_cleanup(table, listing))
+    script += f"rm -rf -- {shlex.join(CLOUDSIM_PATHS)}\n" + _RELOAD_SYSTEMD
     script += _RESTORE_ORIGINALS.format(
         originals=shlex.quote(ORIGINALS_DIR),
         files=shlex.join(RESTORED_FILES),
         work_dir=shlex.quote(WORK_DIR),
+        tables=shlex.join(IPTABLES_TABLES),
     )
     return script + _SET_HOSTNAME.format(hostname=shlex.quote(server.name))
 
 
-def iptables_cleanup(filter_rules: str) -> list[str]:
-    """Return the commands deleting CloudSim's chains and every jump to them, from `iptables -S`."""
-    prefix = iptables_prefix("filter", False)
+def list_rules_script() -> str:
+    """Return the script printing `iptables -S` of each table after a "*table" line."""
+    lines = ["if command -v iptables > /dev/null 2>&1; then"]
+    for table in IPTABLES_TABLES:
+        lines += [f"  echo {shlex.quote('*' + table)}", f"  {iptables_prefix(table, False)} -S"]
+    return "\n".join([*lines, "fi", ""])
+
+
+def parse_rule_listing(output: str) -> dict[str, str]:
+    """Split list_rules_script's output into each table's `iptables -S` text."""
+    tables: dict[str, list[str]] = {}
+    current: list[str] | None = None
+    for line in output.splitlines():
+        if line.startswith("*"):
+            current = tables.setdefault(line[1:], [])
+        elif current is not None:
+            current.append(line)
+    return {table: "\n".join(lines) for table, lines in tables.items()}
+
+
+def iptables_cleanup(table: str, rules: str) -> list[str]:
+    """Return the commands deleting CloudSim's chains of one table and every jump to them."""
+    prefix = iptables_prefix(table, False)
     jumps: list[str] = []
     chains: list[str] = []
-    for line in filter_rules.splitlines():
+    for line in rules.splitlines():
         words = shlex.split(line)
-        if len(words) == 2 and words[0] == "-N" and words[1] in CLOUDSIM_CHAINS:
+        if len(words) == 2 and words[0] == "-N" and words[1].startswith(CHAIN_PREFIX):
             chains.append(words[1])
-        elif len(words) > 2 and words[0] == "-A" and words[1] not in CLOUDSIM_CHAINS:
-            if _jump_target(words[2:]) in CLOUDSIM_CHAINS:
+        elif len(words) > 2 and words[0] == "-A" and not words[1].startswith(CHAIN_PREFIX):
+            if (_jump_target(words[2:]) or "").startswith(CHAIN_PREFIX):
                 jumps.append(f"{prefix} -D {shlex.join(words[1:])}")
     # A chain can only go once nothing jumps to it, and only when empty.
     return [
@@ -177,9 +243,9 @@ def prepare(
 
 
 def clean_up(executor: SSHExecutor, server: Server, public_keys: Sequence[str]) -> None:
-    """Remove what CloudSim put on the server and give it back its own hostname."""
-    filter_rules = run(executor, server, _LIST_FILTER_RULES)
-    run(executor, server, cleanup_script(server, public_keys, filter_rules))
+    """Remove what CloudSim put on the server and give it back its own state and name."""
+    rules = parse_rule_listing(run(executor, server, list_rules_script()))
+    run(executor, server, cleanup_script(server, public_keys, rules))
 
 
 def run(executor: SSHExecutor, server: Server, script: str) -> str:

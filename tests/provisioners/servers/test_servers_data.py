@@ -10,9 +10,28 @@ from libcloud.compute.base import NodeAuthSSHKey
 from libcloud.compute.providers import get_driver
 
 from constellations.plans.common import FIREWALL_CHAIN
-from constellations.plans.roles import SIMULATOR_VENV
-from constellations.plans.router import FORWARD_CHAIN
+from constellations.plans.roles import (
+    CLOUDSIM_ENV,
+    CLOUDSIM_INSTANCE,
+    CLOUDSIM_ROOT,
+    CLOUDSIM_VENV,
+    SIMULATOR_VENV,
+)
+from constellations.plans.router import (
+    CSROUTER_COMMAND,
+    CSROUTER_CONFIG,
+    CSROUTER_SERVICE,
+    CSROUTER_VENV,
+    FORWARD_CHAIN,
+    OCU_CHAIN,
+    OPENVPN_DIR,
+    PKI_DIR,
+    SYSTEMD_DIR,
+    VPN_INSTANCE,
+    VPN_SERVICE,
+)
 from constellations.plans.software import REMOTE_ROOT
+from provisioners.operations.sysctl import DEFAULT_PERSIST_PATH
 from provisioners.servers import register, remote
 from provisioners.servers.claims import choose_server
 from provisioners.servers.driver import ServersNodeDriver
@@ -190,7 +209,7 @@ def test_iptables_cleanup_deletes_jumps_then_chains() -> None:
             "-A CLOUDSIM-IN -s 10.0.0.0/24 -j ACCEPT",
         ]
     )
-    assert remote.iptables_cleanup(listing) == [
+    assert remote.iptables_cleanup("filter", listing) == [
         "iptables -w 10 -t filter -D INPUT -j CLOUDSIM-IN",
         "iptables -w 10 -t filter -D FORWARD -m comment --comment 'cloud sim' -j CLOUDSIM-FWD",
         "iptables -w 10 -t filter -D OTHER -g CLOUDSIM-IN",
@@ -199,13 +218,54 @@ def test_iptables_cleanup_deletes_jumps_then_chains() -> None:
         "iptables -w 10 -t filter -X CLOUDSIM-IN",
         "iptables -w 10 -t filter -X CLOUDSIM-FWD",
     ]
-    assert remote.iptables_cleanup("-P INPUT ACCEPT\n-A INPUT -j ACCEPT") == []
+    assert remote.iptables_cleanup("filter", "-P INPUT ACCEPT\n-A INPUT -j ACCEPT") == []
+    raw = "-P PREROUTING ACCEPT\n-N CLOUDSIM-OCU\n-A PREROUTING -j CLOUDSIM-OCU"
+    assert remote.iptables_cleanup("raw", raw) == [
+        "iptables -w 10 -t raw -D PREROUTING -j CLOUDSIM-OCU",
+        "iptables -w 10 -t raw -F CLOUDSIM-OCU",
+        "iptables -w 10 -t raw -X CLOUDSIM-OCU",
+    ]
+
+
+def test_rule_listings_are_split_by_table() -> None:
+    output = "*filter\n-P INPUT ACCEPT\n-N CLOUDSIM-IN\n*nat\n*raw\n-P OUTPUT ACCEPT\n"
+    assert remote.parse_rule_listing(output) == {
+        "filter": "-P INPUT ACCEPT\n-N CLOUDSIM-IN",
+        "nat": "",
+        "raw": "-P OUTPUT ACCEPT",
+    }
+    script = remote.list_rules_script()
+    assert all(f"echo '*{table}'" in script for table in ("filter", "nat", "mangle", "raw"))
 
 
 def test_cleanup_covers_what_the_deploy_plans_put_on_machines() -> None:
-    assert set(remote.CLOUDSIM_CHAINS) == {FIREWALL_CHAIN, FORWARD_CHAIN}
-    assert SIMULATOR_VENV in remote.CLOUDSIM_PATHS
-    assert any(REMOTE_ROOT.startswith(path + "/") for path in remote.CLOUDSIM_PATHS)
+    assert all(
+        c.startswith(remote.CHAIN_PREFIX) for c in (FIREWALL_CHAIN, FORWARD_CHAIN, OCU_CHAIN)
+    )
+    placed = [
+        SIMULATOR_VENV,
+        REMOTE_ROOT,
+        CLOUDSIM_ROOT,
+        CLOUDSIM_VENV,
+        CLOUDSIM_ENV,
+        CLOUDSIM_INSTANCE,
+        CSROUTER_VENV,
+        CSROUTER_CONFIG,
+        CSROUTER_COMMAND,
+        f"{PKI_DIR}/server.key",
+        f"{OPENVPN_DIR}/{VPN_INSTANCE}.conf",
+        f"{SYSTEMD_DIR}/{CSROUTER_SERVICE}.service",
+        f"{SYSTEMD_DIR}/{VPN_SERVICE}.service.d/csrouter.conf",
+        f"{SYSTEMD_DIR}/cloudsim.service",
+        DEFAULT_PERSIST_PATH,
+    ]
+    uncovered = [
+        path
+        for path in placed
+        if not any(path == p or path.startswith(p + "/") for p in remote.CLOUDSIM_PATHS)
+    ]
+    assert uncovered == []
+    assert {f"{CSROUTER_SERVICE}.service", f"{VPN_SERVICE}.service"} <= set(remote.SERVICES)
 
 
 def test_scripts_never_touch_the_login_key() -> None:
@@ -213,6 +273,6 @@ def test_scripts_never_touch_the_login_key() -> None:
     other: KeyPair = make_key_pair("constellation")
     prepare = remote.prepare_script(server, "c1-router", LOGIN.public_line, [LOGIN.public_line])
     assert LOGIN.blob not in prepare
-    cleanup = remote.cleanup_script(server, [LOGIN.public_line, other.public_line], "")
+    cleanup = remote.cleanup_script(server, [LOGIN.public_line, other.public_line], {})
     assert LOGIN.blob not in cleanup and other.blob in cleanup
     assert "hostname box1\n" in cleanup

@@ -17,24 +17,34 @@ from .keys import KeyPair, make_key_pair
 from .shell import Shell
 
 TAGS = {"cloudsim:constellation": "c1", "cloudsim:role": "router"}
-# Leftovers of a deploy, as CloudSim's plans make them (firewall chains, software).
+# Leftovers of a deploy, as CloudSim's plans make them (firewall, software, services, VPN).
 DEPLOYED = """set -e
 iptables -N CLOUDSIM-IN
 iptables -A CLOUDSIM-IN -j ACCEPT
 iptables -I INPUT -j CLOUDSIM-IN
+iptables -I INPUT -i tun+ -j DROP
 iptables -N CLOUDSIM-FWD
 iptables -I FORWARD -j CLOUDSIM-FWD
-mkdir -p /opt/drcsim/bin /opt/cloudsim/wheelhouse
-touch /opt/drcsim/bin/drcsim /etc/sysctl.d/60-cloudsim.conf
-printf '10.216.9.1 c1-router\n' > /etc/hosts
-printf 'CloudSim constellation c1\n' > /etc/motd
+iptables -t raw -N CLOUDSIM-OCU
+iptables -t raw -I PREROUTING -j CLOUDSIM-OCU
+iptables -t nat -A POSTROUTING -s 10.8.0.0/24 -d 10.216.9.0/24 -j MASQUERADE
+sysctl -q -w net.ipv4.ip_forward=1
+mkdir -p /opt/drcsim/bin /opt/cloudsim/wheelhouse /etc/cloudsim /etc/openvpn/server/cloudsim
+touch /opt/drcsim/bin/drcsim /etc/sysctl.d/60-cloudsim.conf /etc/cloudsim/cloudsim.env
+touch /etc/openvpn/server/cloudsim/server.key /etc/systemd/system/csrouter.service
+printf '10.216.9.1 c1-router\\n' > /etc/hosts
+printf 'CloudSim constellation c1\\n' > /etc/motd
 """
-# What CloudSim overwrites, so that a release must restore it.
-ORIGINALS = "cat /etc/hosts /etc/motd; ip -4 route show default; hostname"
+# What CloudSim changes, so that a release must restore it.
+ORIGINALS = (
+    "cat /etc/hosts /etc/motd; ip -4 route show default; hostname; "
+    "sysctl -n net.ipv4.ip_forward; "
+    "for table in filter nat mangle raw; do iptables -t $table -S; done"
+)
 LEFTOVERS = (
-    "iptables -S | grep CLOUDSIM; "
-    "ls -d /opt/drcsim /opt/cloudsim /etc/sysctl.d/60-cloudsim.conf /var/lib/cloudsim-servers"
-    " 2>/dev/null; true"
+    "ls -d /opt/drcsim /opt/cloudsim /etc/cloudsim /etc/openvpn/server/cloudsim "
+    "/etc/sysctl.d/60-cloudsim.conf /etc/systemd/system/csrouter.service "
+    "/var/lib/cloudsim-servers 2>/dev/null; true"
 )
 
 
