@@ -7,6 +7,7 @@ Creating a node claims a free server and prepares it over SSH with the inventory
 from __future__ import annotations
 
 import datetime
+import ipaddress
 import logging
 import time
 from collections.abc import Mapping, Sequence
@@ -118,6 +119,11 @@ class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
     def ex_create_network(self, name: str, cidr: str | None = None) -> ServersNetwork:
         """Take a free pre-made network (on cidr, if given) for name; return the one name has."""
         check_network_name(name)
+        if cidr is not None:
+            try:
+                cidr = str(ipaddress.IPv4Network(cidr))
+            except ValueError as error:
+                raise InvalidRequestError(f"cidr {cidr!r} is not an IPv4 network") from error
         with self._state.transaction() as state:
             existing = state.networks.get(name)
             if existing is not None:

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import subprocess
 from pathlib import Path
 from typing import Any
 
 import pytest
 from libcloud.compute.base import NodeAuthSSHKey
 from libcloud.compute.providers import get_driver
+from libcloud.compute.types import NodeState
 
 from constellations.plans.common import FIREWALL_CHAIN
 from constellations.plans.roles import (
@@ -33,7 +35,7 @@ from constellations.plans.router import (
 from constellations.plans.software import REMOTE_ROOT
 from provisioners.operations.sysctl import DEFAULT_PERSIST_PATH
 from provisioners.servers import register, remote
-from provisioners.servers.claims import choose_server
+from provisioners.servers.claims import choose_server, node_state
 from provisioners.servers.driver import ServersNodeDriver
 from provisioners.servers.errors import (
     InvalidRequestError,
@@ -41,9 +43,19 @@ from provisioners.servers.errors import (
     NetworkNotFoundError,
     NoFreeServerError,
     ServersProviderError,
+    StateError,
 )
 from provisioners.servers.inventory import Inventory
-from provisioners.servers.state import NetworkClaim, ServersState
+from provisioners.servers.state import (
+    STATUS_FAILED,
+    STATUS_PREPARING,
+    STATUS_READY,
+    NetworkClaim,
+    ProcessRef,
+    ServerClaim,
+    ServersState,
+    StateFile,
+)
 
 from .keys import KeyPair, make_key_pair
 
@@ -276,3 +288,54 @@ def test_scripts_never_touch_the_login_key() -> None:
     cleanup = remote.cleanup_script(server, [LOGIN.public_line, other.public_line], {})
     assert LOGIN.blob not in cleanup and other.blob in cleanup
     assert "hostname box1\n" in cleanup
+
+
+def test_a_claim_reads_pending_only_while_its_preparing_process_lives() -> None:
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    dead = ProcessRef(gone.pid, 1)  # a start time no live process has
+
+    def claim(status: str, creator: ProcessRef) -> ServerClaim:
+        return ServerClaim(
+            server="box1",
+            node="c1-sim",
+            network="c1",
+            private_ip="10.9.0.11",
+            public_ip=None,
+            public_key=LOGIN.public_line,
+            tags={},
+            size="existing",
+            status=status,
+            created_at=0.0,
+            creator=creator,
+        )
+
+    assert node_state(claim(STATUS_READY, dead)) == NodeState.RUNNING
+    assert node_state(claim(STATUS_PREPARING, ProcessRef.current())) == NodeState.PENDING
+    assert node_state(claim(STATUS_PREPARING, dead)) == NodeState.ERROR
+    assert node_state(claim(STATUS_FAILED, ProcessRef.current())) == NodeState.ERROR
+
+
+def test_the_state_file_survives_a_round_trip_and_refuses_damage(state_dir: Path) -> None:
+    store = StateFile(state_dir)
+    with store.transaction() as state:
+        state.networks["c1"] = NetworkClaim(
+            name="c1", lan="lan-a", cidr="10.9.0.0/24", created_at=1
+        )
+        state.host_keys["box1"] = "ssh-ed25519 AAAA"
+    assert store.read().networks["c1"].lan == "lan-a"
+    with pytest.raises(RuntimeError), store.transaction() as state:
+        state.networks.clear()
+        raise RuntimeError("a failed change is not written")
+    assert "c1" in store.read().networks
+    store.path.write_text("{not json")
+    with pytest.raises(StateError, match="damaged"):
+        store.read()
+    assert issubclass(StateError, ServersProviderError)
+
+
+def test_a_network_cidr_is_parsed(state_dir: Path) -> None:
+    driver = ServersNodeDriver(inventory=lab(), state_dir=str(state_dir))
+    with pytest.raises(InvalidRequestError, match="not an IPv4 network"):
+        driver.ex_create_network("c1", cidr="10.9.0.0/33")
+    assert driver.ex_create_network("c1", cidr="10.9.1.0/24").extra["lan"] == "lan-b"
