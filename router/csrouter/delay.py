@@ -40,11 +40,3 @@ class DelayLine:
     def next_release(self) -> float | None:
         """Return when the next packet is due, None when nothing is held."""
         return self._held[0][0] if self._held else None
-
-    def drop_all(self) -> int:
-        """Drop every held packet (they must never leave early); return how many."""
-        dropped = len(self._held)
-        for _, _, packet in self._held:
-            packet.drop()
-        self._held.clear()
-        return dropped

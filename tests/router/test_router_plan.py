@@ -1,0 +1,86 @@
+"""The router plan and its templates, without hosts: what it would install."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from csrouter.config import RouterConfig
+from csrouter.rules import queue_rules as daemon_queue_rules
+
+from constellations.definition import load_kind
+from constellations.plans import PLANS, PlanContext
+from constellations.plans.base import Action, VpnMaterial
+from constellations.plans.router import queue_rules, router
+from provisioners import pki
+from provisioners.operations import MachineTemplates, Operation
+
+SUBNET = "10.215.7.0/24"
+
+
+def context(vpn: VpnMaterial | None, wheelhouse: Path | None) -> PlanContext:
+    kind = load_kind("vrc", set(PLANS))
+    return PlanContext(
+        constellation="alpha",
+        team="team",
+        kind=kind,
+        machine=kind.machine("router"),
+        subnet=SUBNET,
+        addresses={m.name: m.address(SUBNET) for m in kind.machines},
+        vpn=vpn,
+        router_wheelhouse=wheelhouse,
+    )
+
+
+@pytest.fixture(scope="module")
+def material() -> VpnMaterial:
+    ca = pki.new_ca("alpha VPN CA")
+    server = pki.issue_server(ca, "cloudsim-router")
+    return VpnMaterial(ca.cert_pem, server.cert_pem, server.key_pem, pki.issue_crl(ca, []))
+
+
+def test_the_plan_installs_the_rules_the_daemon_checks() -> None:
+    daemon = daemon_queue_rules(RouterConfig(lan_subnet=SUBNET))
+    assert [(r.table, r.chain, list(r.args)) for r in daemon] == queue_rules(SUBNET)
+
+
+def test_without_vpn_material_the_router_only_forwards() -> None:
+    names = [item.name for item in router(context(None, None))]
+    assert not any("openvpn" in name.lower() or "csrouter" in name for name in names)
+
+
+def test_a_vpn_needs_the_csrouter_wheelhouse(material: VpnMaterial) -> None:
+    with pytest.raises(ValueError, match="wheelhouse"):
+        router(context(material, None))
+
+
+def test_the_vpn_plan_drops_everything_but_the_lan_for_clients(
+    material: VpnMaterial, tmp_path: Path
+) -> None:
+    (tmp_path / "SHA256SUMS").write_text("")
+    items = router(context(material, tmp_path))
+    names = [item.name for item in items if isinstance(item, Operation)]
+    assert "iptables -t filter CLOUDSIM-FWD -i tun+ -j DROP" in names
+    assert "iptables -t filter INPUT -i tun+ -j DROP" in names
+    assert any("NFQUEUE --queue-num 0" in name and "-t raw" in name for name in names)
+    assert any(isinstance(item, Action) and "OpenVPN" in item.name for item in items)
+    assert names[-1] == "service openvpn-server@cloudsim (running, enabled)"
+
+
+def test_the_client_template_inlines_the_bundle(material: VpnMaterial) -> None:
+    text = MachineTemplates().render(
+        "router/client.ovpn.j2",
+        {
+            "user": "operator@team.example",
+            "constellation": "alpha",
+            "file_name": "alpha.ovpn",
+            "remote_host": "198.51.100.7",
+            "remote_port": 1194,
+            "server_name": "cloudsim-router",
+            "ca_cert": material.ca_cert,
+            "client_cert": "CERT",
+            "client_key": "KEY",
+        },
+    )
+    assert "remote 198.51.100.7 1194\n" in text and "<key>\nKEY\n</key>" in text
+    assert "verify-x509-name cloudsim-router name" in text and "remote-cert-tls server" in text
