@@ -37,13 +37,17 @@ class ArgvProxyCommand(paramiko.ProxyCommand):
 
     def recv(self, size: int) -> bytes:
         """Return up to size bytes; b"" once the proxy has exited (end of stream)."""
-        assert self.process.stdout is not None
-        ready, _, _ = select.select([self.process.stdout], [], [], self.timeout)
-        if not ready:
-            raise TimeoutError()
+        stdout = self.process.stdout
+        assert stdout is not None
         try:
+            ready, _, _ = select.select([stdout], [], [], self.timeout)
+            if not ready:
+                raise TimeoutError()
             # unlike paramiko's version, do not spin on a proxy that closed its stdout
-            return os.read(self.process.stdout.fileno(), size)
+            return os.read(stdout.fileno(), size)
+        except ValueError:
+            # close() ran while paramiko's reader thread waited here: that is the end of stream
+            return b""
         except OSError as exc:
             raise paramiko.ProxyCommandFailure(" ".join(self.cmd), exc.strerror) from exc
 
