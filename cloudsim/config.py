@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import os
 import secrets
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -91,6 +92,29 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_ARGON2_TIME_COST": Setting("3", "Argon2id passes when hashing a password"),
     "CLOUDSIM_ARGON2_MEMORY_KIB": Setting("65536", "Argon2id memory per password hash, KiB"),
     "CLOUDSIM_LOG_LEVEL": Setting("INFO", "Log level of the web server and workers"),
+    "CLOUDSIM_ARTIFACT_STORE": Setting(
+        "local",
+        "Where run logs are kept: local (a folder) or a libcloud storage provider "
+        "(s3, google_storage, azure_blobs, ...)",
+    ),
+    "CLOUDSIM_ARTIFACT_DIR": Setting(
+        "", "Folder of the local log store; default INSTANCE_DIR/artifacts"
+    ),
+    "CLOUDSIM_ARTIFACT_CONTAINER": Setting("cloudsim-logs", "Container (bucket) of the run logs"),
+    "CLOUDSIM_ARTIFACT_KEY": Setting("", "Access key of the object store (libcloud providers)"),
+    "CLOUDSIM_ARTIFACT_SECRET": Setting("", "Secret key of the object store (libcloud providers)"),
+    "CLOUDSIM_ARTIFACT_OPTIONS": Setting(
+        "{}", "JSON object of extra libcloud storage driver arguments (region, host, ...)"
+    ),
+    "CLOUDSIM_LEADERBOARD_FOR_USERS": Setting(
+        "all", "What team users see of the leaderboard: all (every team), own (their row), none"
+    ),
+    "CLOUDSIM_RUN_SUPERVISE_SECONDS": Setting(
+        "5", "How often live runs are checked for their end (time limit, falls, window, stop)"
+    ),
+    "CLOUDSIM_RUN_GRACE_SECONDS": Setting(
+        "120", "Wall seconds past a run's timeout after which CloudSim stops it regardless"
+    ),
 }
 
 
@@ -122,13 +146,22 @@ class Config:
     argon2_time_cost: int
     argon2_memory_kib: int
     log_level: str
+    artifact_store: str
+    artifact_dir: Path
+    artifact_container: str
+    artifact_key: str
+    artifact_secret: str = field(repr=False)
+    artifact_options: dict[str, object]
+    leaderboard_for_users: str
+    run_supervise_seconds: int
+    run_grace_seconds: int
     testing: bool = False
 
     def __repr__(self) -> str:
         shown = ", ".join(
             f"{f.name}={getattr(self, f.name)!r}"
             for f in fields(self)
-            if f.name not in {"secret_key", "encryption_keys", "admin_password"}
+            if f.name not in {"secret_key", "encryption_keys", "admin_password", "artifact_secret"}
         )
         return f"Config({shown})"
 
@@ -194,9 +227,37 @@ class Config:
             argon2_time_cost=number("CLOUDSIM_ARGON2_TIME_COST"),
             argon2_memory_kib=number("CLOUDSIM_ARGON2_MEMORY_KIB"),
             log_level=get("CLOUDSIM_LOG_LEVEL").upper(),
+            artifact_store=get("CLOUDSIM_ARTIFACT_STORE").strip().lower(),
+            artifact_dir=Path(get("CLOUDSIM_ARTIFACT_DIR") or instance_dir / "artifacts"),
+            artifact_container=get("CLOUDSIM_ARTIFACT_CONTAINER"),
+            artifact_key=get("CLOUDSIM_ARTIFACT_KEY"),
+            artifact_secret=get("CLOUDSIM_ARTIFACT_SECRET"),
+            artifact_options=_json_object("CLOUDSIM_ARTIFACT_OPTIONS", get),
+            leaderboard_for_users=_choice(
+                "CLOUDSIM_LEADERBOARD_FOR_USERS", get, ("all", "own", "none")
+            ),
+            run_supervise_seconds=number("CLOUDSIM_RUN_SUPERVISE_SECONDS"),
+            run_grace_seconds=number("CLOUDSIM_RUN_GRACE_SECONDS"),
         )
         values.update(overrides)
         return cls(**values)  # type: ignore[arg-type]
+
+
+def _json_object(name: str, get: Callable[[str], str]) -> dict[str, object]:
+    try:
+        value = json.loads(get(name) or "{}")
+    except ValueError as exc:
+        raise ConfigError(f"{name} must be a JSON object: {exc}") from None
+    if not isinstance(value, dict):
+        raise ConfigError(f"{name} must be a JSON object, got {get(name)!r}")
+    return value
+
+
+def _choice(name: str, get: Callable[[str], str], choices: tuple[str, ...]) -> str:
+    value = get(name).strip().lower()
+    if value not in choices:
+        raise ConfigError(f"{name} must be one of {', '.join(choices)}, got {value!r}")
+    return value
 
 
 def _instance_secret(path: Path, generate: object) -> str:

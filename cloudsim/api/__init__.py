@@ -31,9 +31,9 @@ def init_api(app: Flask) -> Api:
         },
     )
     api = Api(app)
-    from cloudsim.api import account, audit, constellations, jobs, people
+    from cloudsim.api import account, audit, competition, constellations, jobs, people
 
-    for module in (account, people, jobs, audit, constellations):
+    for module in (account, people, jobs, audit, constellations, competition):
         csrf.exempt(module.blp)
         api.register_blueprint(module.blp, url_prefix=API_PREFIX)
 

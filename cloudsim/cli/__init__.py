@@ -67,7 +67,7 @@ def main(ctx: click.Context) -> None:
 
 
 def _register() -> None:
-    from cloudsim.cli import db, fleet, people, providers, up
+    from cloudsim.cli import competition, db, fleet, people, providers, up
 
     main.add_command(up.up)
     main.add_command(db.db)
@@ -75,6 +75,10 @@ def _register() -> None:
     main.add_command(people.user)
     main.add_command(fleet.constellation)
     main.add_command(providers.provider)
+    main.add_command(competition.task)
+    main.add_command(competition.schedule_group)
+    main.add_command(competition.run)
+    main.add_command(competition.leaderboard)
 
 
 _register()

@@ -43,12 +43,17 @@ def celery_init_app(app: Flask, config: Config) -> Celery:
                 "task": "cloudsim.fleet.reconcile",
                 "schedule": timedelta(minutes=5),
             },
+            "supervise-runs": {
+                "task": "cloudsim.competition.supervise",
+                "schedule": timedelta(seconds=config.run_supervise_seconds),
+            },
         },
         timezone="UTC",
     )
     celery.set_default()
     app.extensions["celery"] = celery
     # Importing the task modules registers them with the app's Celery.
+    from cloudsim.competition import engine as competition_engine  # noqa: F401
     from cloudsim.fleet import engine, reconcile  # noqa: F401
     from cloudsim.jobs import diagnostics, runner, service  # noqa: F401
 

@@ -6,7 +6,7 @@ import enum
 from datetime import datetime
 from typing import TYPE_CHECKING
 
-from sqlalchemy import BigInteger, ForeignKey, String, Text
+from sqlalchemy import BigInteger, ForeignKey, String, Text, UniqueConstraint
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from cloudsim.models.base import Base, UTCDateTime, str_enum, utcnow
@@ -33,6 +33,8 @@ class Task(Base):
     uplink_bits: Mapped[int] = mapped_column(BigInteger)
     downlink_bits: Mapped[int] = mapped_column(BigInteger)
     order: Mapped[int] = mapped_column(default=0)
+    # The zone the officer entered the window in: pages and exports show it that way again.
+    time_zone: Mapped[str] = mapped_column(String(64), default="UTC")
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
 
     team: Mapped[Team] = relationship()
@@ -69,6 +71,11 @@ class Run(Base):
     )
     started_by_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
     state: Mapped[RunState] = mapped_column(str_enum(RunState), default=RunState.STARTING)
+    # Set while the run is live and cleared when it ends: the unique index lets the database
+    # refuse a second live run on one constellation even when two starts race.
+    active_constellation_id: Mapped[int | None] = mapped_column(unique=True)
+    # Why the run is being stopped (the user, the window, the time limit), before it ends.
+    stop_reason: Mapped[str | None] = mapped_column(String(32))
     end_reason: Mapped[str | None] = mapped_column(String(32))
     error: Mapped[str | None] = mapped_column(Text)
     score: Mapped[int] = mapped_column(default=0)
@@ -77,6 +84,7 @@ class Run(Base):
     uplink_bits_used: Mapped[int] = mapped_column(BigInteger, default=0)
     downlink_bits_used: Mapped[int] = mapped_column(BigInteger, default=0)
     started_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    running_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
 
     task: Mapped[Task] = relationship(back_populates="runs")
@@ -98,6 +106,7 @@ class Artifact(Base):
     """A log file of a run, stored outside the database and identified by its checksum."""
 
     __tablename__ = "artifacts"
+    __table_args__ = (UniqueConstraint("run_id", "filename"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)

@@ -30,6 +30,7 @@ def register_web(app: Flask) -> None:
     """Register every page blueprint, the error pages and the template globals."""
     from cloudsim.audit.views import bp as audit_bp
     from cloudsim.auth.views import bp as auth_bp
+    from cloudsim.competition.views import bp as competition_bp
     from cloudsim.dashboard.views import bp as dashboard_bp
     from cloudsim.fleet.views import bp as fleet_bp
     from cloudsim.jobs.views import bp as jobs_bp
@@ -37,6 +38,7 @@ def register_web(app: Flask) -> None:
 
     for blueprint in (auth_bp, dashboard_bp, people_bp, fleet_bp, jobs_bp, audit_bp):
         app.register_blueprint(blueprint)
+    app.register_blueprint(competition_bp)
 
     app.jinja_env.globals.update(Role=Role, logout_form=ConfirmForm)
     app.jinja_env.filters["datetime"] = format_datetime

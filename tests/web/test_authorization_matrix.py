@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -16,6 +17,7 @@ from cloudsim.auth.tokens import issue_token
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Constellation, ConstellationState, Role, Team, User
+from tests.competition.support import finished_run, open_task, ready_constellation
 from tests.conftest import log_in, make_user, token_for
 
 PERSONAS = ("anon", "user_a", "user_b", "officer", "admin")
@@ -85,6 +87,32 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_constellations.ConstellationById", "DELETE"): (401, 403, 403, 403, 202),
     ("api_constellations.Retry", "POST"): (401, 403, 403, 403, 409),
     ("api_constellations.SshBundle", "GET"): (401, 403, 403, 200, 200),
+    # competition (team A's open task, finished run and its stored log)
+    ("competition.tasks", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("competition.schedule_task", "POST"): (LOGIN, 403, 403, 400, 400),
+    ("competition.delete_task", "POST"): (LOGIN, 403, 403, 302, 302),
+    ("competition.import_schedule", "POST"): (LOGIN, 403, 403, 400, 400),
+    ("competition.export_schedule", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("competition.start", "POST"): (LOGIN, 302, 403, 302, 302),
+    ("competition.runs", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("competition.run", "GET"): (LOGIN, 200, 404, 200, 200),
+    ("competition.run_status", "GET"): (LOGIN, 200, 404, 200, 200),
+    ("competition.stop", "POST"): (LOGIN, 409, 404, 409, 409),  # it has finished
+    ("competition.download", "GET"): (LOGIN, 200, 404, 200, 200),
+    ("competition.leaderboard", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("api_competition.Tasks", "GET"): (401, 200, 200, 200, 200),
+    ("api_competition.Tasks", "POST"): (401, 403, 403, 201, 201),
+    ("api_competition.OpenTasks", "GET"): (401, 200, 200, 200, 200),
+    ("api_competition.TaskById", "GET"): (401, 200, 404, 200, 200),
+    ("api_competition.TaskById", "DELETE"): (401, 403, 403, 204, 204),
+    ("api_competition.StartRun", "POST"): (401, 202, 403, 202, 202),
+    ("api_competition.Season", "GET"): (401, 403, 403, 200, 200),
+    ("api_competition.Season", "POST"): (401, 403, 403, 201, 201),
+    ("api_competition.Runs", "GET"): (401, 200, 200, 200, 200),
+    ("api_competition.RunById", "GET"): (401, 200, 404, 200, 200),
+    ("api_competition.StopRun", "POST"): (401, 409, 404, 409, 409),
+    ("api_competition.RunLog", "GET"): (401, 200, 404, 200, 200),
+    ("api_competition.Leaderboard", "GET"): (401, 200, 200, 200, 200),
 }
 
 IGNORED_ENDPOINTS = {"static"}
@@ -108,6 +136,17 @@ def _bodies(team_id: int) -> dict[tuple[str, str], Callable[[], dict[str, Any]]]
             "kind": "vrc",
             "team_id": team_id,
         },
+        ("api_competition.Tasks", "POST"): lambda: {
+            "name": f"Matrix {next(_seq)}",
+            "world": "vrc_task_1",
+            "start": "2030-01-01 09:00",
+            "stop": "2030-01-01 12:00",
+            "team_ids": [team_id],
+        },
+        ("api_competition.Season", "POST"): lambda: {
+            "yaml": "tasks: [{name: Matrix season, world: vrc_task_2, "
+            f"start: '2030-01-0{next(_seq) % 9 + 1} 09:00', stop: '2030-01-10 09:00'}}]"
+        },
     }
 
 
@@ -129,7 +168,13 @@ def test_every_route_is_in_the_matrix(app: Flask) -> None:
 
 
 def _url(
-    app: Flask, endpoint: str, team_a: Team, user_a: User, job_id: str, constellation_id: int
+    app: Flask,
+    endpoint: str,
+    team_a: Team,
+    user_a: User,
+    job_id: str,
+    constellation_id: int,
+    tmp: Path,
 ) -> str:
     """Build the URL, pointing every id at something of team A (fresh where it gets deleted)."""
     rule = next(r for r in app.url_map.iter_rules() if r.endpoint == endpoint)
@@ -144,6 +189,12 @@ def _url(
         values["job_id"] = job_id
     if "ref" in rule.arguments:
         values["ref"] = constellation_id
+    if {"task_id", "run_id"} & set(rule.arguments):
+        ready_constellation(constellation_id)
+        values["task_id"] = open_task(team_a.id).id
+        run = finished_run(open_task(team_a.id), constellation_id, tmp)
+        values.update(run_id=run.id, artifact_id=run.artifacts[0].id)
+        values = {k: v for k, v in values.items() if k in rule.arguments}
     with app.test_request_context():
         from flask import url_for
 
@@ -152,7 +203,7 @@ def _url(
 
 @pytest.mark.parametrize("persona", PERSONAS)
 def test_route_answers_match_the_matrix(
-    app: Flask, people: dict[str, User | None], persona: str
+    app: Flask, people: dict[str, User | None], persona: str, tmp_path: Path
 ) -> None:
     app.config["WTF_CSRF_ENABLED"] = False
     team_a = people["user_a"].team  # type: ignore[union-attr]
@@ -175,7 +226,7 @@ def test_route_answers_match_the_matrix(
         log_in(client, user)
     # Logging out ends the session the other visits use: visit it last.
     for (endpoint, method), expected in sorted(MATRIX.items(), key=lambda i: i[0] == LOGOUT):
-        url = _url(app, endpoint, team_a, people["user_a"], job_id, constellation.id)  # type: ignore[arg-type]
+        url = _url(app, endpoint, team_a, people["user_a"], job_id, constellation.id, tmp_path)  # type: ignore[arg-type]
         api = url.startswith("/api/")
         body = bodies.get((endpoint, method), lambda: {})()
         if api:

@@ -1,0 +1,239 @@
+"""Tasks, the season schedule, runs, their logs and the leaderboard."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from flask import Response, current_app
+from flask.views import MethodView
+from flask_smorest import Blueprint
+from marshmallow import Schema, fields, validate
+
+from cloudsim.api.common import SelectPage, caller
+from cloudsim.competition import runs as run_service
+from cloudsim.competition import schedule, season
+from cloudsim.competition.artifacts import LogStore
+from cloudsim.competition.views import log_of
+
+blp = Blueprint("api_competition", __name__, description="Tasks, runs, logs and scores")
+
+
+class TaskSchema(Schema):
+    id = fields.Int(dump_only=True)
+    team_id = fields.Int(dump_only=True)
+    name = fields.Str()
+    world = fields.Str()
+    run_config = fields.Int()
+    window_start = fields.DateTime()
+    window_stop = fields.DateTime()
+    time_zone = fields.Str()
+    timeout_s = fields.Int()
+    latency_ms = fields.Int()
+    uplink_bits = fields.Int()
+    downlink_bits = fields.Int()
+    order = fields.Int()
+
+
+class TaskCreateSchema(Schema):
+    name = fields.Str(required=True, validate=validate.Length(min=1, max=120))
+    world = fields.Str(required=True, validate=validate.Length(min=1, max=64))
+    run_config = fields.Int(load_default=1)
+    start = fields.Str(
+        required=True, metadata={"description": "Wall-clock time in time_zone, or ISO 8601"}
+    )
+    stop = fields.Str(required=True)
+    time_zone = fields.Str(load_default="UTC", validate=validate.Length(min=1, max=64))
+    timeout_s = fields.Int(load_default=schedule.DEFAULT_TIMEOUT_S)
+    latency_ms = fields.Int(load_default=schedule.DEFAULT_LATENCY_MS)
+    uplink_bits = fields.Int(load_default=schedule.DEFAULT_UPLINK_BITS)
+    downlink_bits = fields.Int(load_default=schedule.DEFAULT_DOWNLINK_BITS)
+    order = fields.Int(load_default=0)
+    team_ids = fields.List(
+        fields.Int(),
+        load_default=None,
+        allow_none=True,
+        metadata={"description": "Teams to schedule it for; null or left out: every team"},
+    )
+
+
+class SeasonSchema(Schema):
+    yaml = fields.Str(required=True, validate=validate.Length(min=1, max=1_000_000))
+
+
+class StartSchema(Schema):
+    constellation_id = fields.Int(load_default=None, allow_none=True)
+
+
+class ScoreEventSchema(Schema):
+    kind = fields.Str()
+    checkpoint = fields.Int(allow_none=True)
+    points = fields.Int()
+    sim_time = fields.Float()
+    wall_time = fields.DateTime()
+    description = fields.Str()
+
+
+class ArtifactSchema(Schema):
+    id = fields.Int()
+    kind = fields.Str()
+    filename = fields.Str()
+    size = fields.Int()
+    sha256 = fields.Str()
+    created_at = fields.DateTime()
+
+
+class RunSchema(Schema):
+    id = fields.Int()
+    task_id = fields.Int()
+    team_id = fields.Int()
+    constellation_id = fields.Int(allow_none=True)
+    state = fields.Str()
+    stop_reason = fields.Str(allow_none=True)
+    end_reason = fields.Str(allow_none=True)
+    error = fields.Str(allow_none=True)
+    score = fields.Int()
+    falls = fields.Int()
+    sim_seconds = fields.Float()
+    uplink_bits_used = fields.Int()
+    downlink_bits_used = fields.Int()
+    started_at = fields.DateTime()
+    running_at = fields.DateTime(allow_none=True)
+    finished_at = fields.DateTime(allow_none=True)
+
+
+class RunDetailSchema(RunSchema):
+    score_events = fields.List(fields.Nested(ScoreEventSchema))
+    artifacts = fields.List(fields.Nested(ArtifactSchema))
+
+
+class StandingSchema(Schema):
+    rank = fields.Int()
+    team_id = fields.Int()
+    team = fields.Str()
+    runs = fields.Int()
+    checkpoints = fields.Int()
+    uplink_share_left = fields.Float()
+    seconds_left = fields.Float()
+
+
+@blp.route("/tasks")
+class Tasks(MethodView):
+    @blp.response(200, TaskSchema(many=True))
+    @blp.paginate(SelectPage, page_size=100, max_page_size=1000)
+    def get(self) -> Any:
+        """List tasks (a team user: their team's whose window has opened)."""
+        return schedule.visible_tasks(caller())
+
+    @blp.arguments(TaskCreateSchema)
+    @blp.response(201, TaskSchema(many=True))
+    def post(self, data: dict[str, Any]) -> Any:
+        """Schedule a task for some teams or every team (officers); one task per team."""
+        spec = schedule.TaskSpec(
+            name=data["name"],
+            world=data["world"],
+            run_config=data["run_config"],
+            window_start=schedule.to_utc(data["start"], data["time_zone"]),
+            window_stop=schedule.to_utc(data["stop"], data["time_zone"]),
+            timeout_s=data["timeout_s"],
+            latency_ms=data["latency_ms"],
+            uplink_bits=data["uplink_bits"],
+            downlink_bits=data["downlink_bits"],
+            order=data["order"],
+            time_zone=data["time_zone"].strip(),
+        )
+        return schedule.schedule(caller(), spec, data["team_ids"])
+
+
+@blp.route("/tasks/open")
+class OpenTasks(MethodView):
+    @blp.response(200, TaskSchema(many=True))
+    def get(self) -> Any:
+        """List the tasks whose window is open now (a team user: their team's)."""
+        return schedule.open_tasks(caller())
+
+
+@blp.route("/tasks/<int:task_id>")
+class TaskById(MethodView):
+    @blp.response(200, TaskSchema)
+    def get(self, task_id: int) -> Any:
+        """Return a task."""
+        return schedule.get_task(caller(), task_id)
+
+    @blp.response(204)
+    def delete(self, task_id: int) -> None:
+        """Delete a task nobody has run (officers)."""
+        schedule.delete_task(caller(), task_id)
+
+
+@blp.route("/tasks/<int:task_id>/runs")
+class StartRun(MethodView):
+    @blp.arguments(StartSchema)
+    @blp.response(202, RunSchema)
+    def post(self, data: dict[str, Any], task_id: int) -> Any:
+        """Start a run of an open task on the team's ready constellation; follow its state."""
+        return run_service.start_run(caller(), task_id, data["constellation_id"])
+
+
+@blp.route("/schedule")
+class Season(MethodView):
+    @blp.response(200, SeasonSchema)
+    def get(self) -> Any:
+        """Export the season's schedule as YAML (officers)."""
+        return {"yaml": season.export_season(caller())}
+
+    @blp.arguments(SeasonSchema)
+    @blp.response(201, TaskSchema(many=True))
+    def post(self, data: dict[str, Any]) -> Any:
+        """Import a season's schedule from YAML (officers); tasks already there are kept."""
+        return season.import_season(caller(), data["yaml"])
+
+
+@blp.route("/runs")
+class Runs(MethodView):
+    @blp.response(200, RunSchema(many=True))
+    @blp.paginate(SelectPage, page_size=50, max_page_size=500)
+    def get(self) -> Any:
+        """List runs (a team user: their team's)."""
+        return run_service.visible_runs(caller())
+
+
+@blp.route("/runs/<int:run_id>")
+class RunById(MethodView):
+    @blp.response(200, RunDetailSchema)
+    def get(self, run_id: int) -> Any:
+        """Return a run with its score events and logs."""
+        return run_service.get_run(caller(), run_id)
+
+
+@blp.route("/runs/<int:run_id>/stop")
+class StopRun(MethodView):
+    @blp.response(202, RunSchema)
+    def post(self, run_id: int) -> Any:
+        """Stop a live run (its team, or officers)."""
+        return run_service.stop_run(caller(), run_id)
+
+
+@blp.route("/runs/<int:run_id>/logs/<int:artifact_id>")
+class RunLog(MethodView):
+    @blp.response(200, content_type="application/octet-stream")
+    def get(self, run_id: int, artifact_id: int) -> Any:
+        """Download one of the run's logs (streamed; the X-Checksum-SHA256 header to verify)."""
+        artifact = log_of(caller(), run_id, artifact_id)
+        store = LogStore(current_app.config["CLOUDSIM"])
+        return Response(
+            store.stream(artifact.location),
+            mimetype="application/octet-stream",
+            headers={
+                "Content-Disposition": f'attachment; filename="run-{run_id}-{artifact.filename}"',
+                "Content-Length": str(artifact.size),
+                "X-Checksum-SHA256": artifact.sha256,
+            },
+        )
+
+
+@blp.route("/leaderboard")
+class Leaderboard(MethodView):
+    @blp.response(200, StandingSchema(many=True))
+    def get(self) -> Any:
+        """Return the ranking (what team users see is the leaderboard setting)."""
+        return run_service.leaderboard(caller())

@@ -1,0 +1,226 @@
+"""Run logs: copied off the machines (streamed, sha256-verified, resumable) into the log store.
+
+The store is a libcloud storage driver: `local` (a folder under the instance by default) or
+any object store libcloud knows, so there is one code path for both.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import shlex
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from libcloud.storage.base import Container, StorageDriver
+from libcloud.storage.providers import get_driver
+from libcloud.storage.types import ContainerDoesNotExistError, ObjectDoesNotExistError
+from sqlalchemy import select
+
+from cloudsim.config import Config
+from cloudsim.errors import CloudSimError
+from cloudsim.extensions import db
+from cloudsim.fleet.router_control import BANDWIDTH_LOG
+from cloudsim.models import Artifact, Run
+from provisioners.ssh import Machine as Target
+from provisioners.ssh import SSHError, SSHExecutor
+
+RUNS_DIR = "/var/lib/cloudsim/runs"
+CHUNK = 1 << 20
+
+
+class LogCollectionError(CloudSimError):
+    """A log could not be copied off a machine or did not arrive intact."""
+
+
+@dataclass(frozen=True)
+class RemoteLog:
+    """A log of a run on one of its machines."""
+
+    kind: str
+    machine: str  # role in the constellation: sim or router
+    filename: str
+    required: bool = True
+
+
+def run_dir(run_id: int) -> str:
+    """Return the folder of a run's logs on the sim and the router."""
+    return f"{RUNS_DIR}/{run_id}"
+
+
+RUN_LOGS = (
+    RemoteLog("score", "sim", "score.jsonl"),
+    RemoteLog("final", "sim", "final.json", required=False),  # absent if the simulator died
+    RemoteLog("meta", "sim", "meta.json"),
+    RemoteLog("commands", "sim", "commands.jsonl"),
+    RemoteLog("state", "sim", "state.msgpack"),
+    RemoteLog("output", "sim", "simulator.log", required=False),
+    RemoteLog("bandwidth", "router", "bandwidth.jsonl"),
+)
+
+
+class LogStore:
+    """Where run logs are kept: a libcloud storage container."""
+
+    def __init__(self, config: Config) -> None:
+        self.driver = _driver(config)
+        self.container_name = config.artifact_container
+        self._container: Container | None = None
+
+    @property
+    def container(self) -> Container:
+        if self._container is None:
+            try:
+                self._container = self.driver.get_container(self.container_name)
+            except ContainerDoesNotExistError:
+                self._container = self.driver.create_container(self.container_name)
+        return self._container
+
+    @staticmethod
+    def object_name(run_id: int, filename: str) -> str:
+        """Return the name a run's log has in the store."""
+        return f"runs/{run_id}/{filename}"
+
+    def holds(self, name: str, size: int) -> bool:
+        """Return whether the store has an object of that name and size."""
+        try:
+            return int(self.driver.get_object(self.container_name, name).size) == size
+        except (ObjectDoesNotExistError, ContainerDoesNotExistError):
+            return False
+
+    def put(self, path: Path, name: str) -> None:
+        """Store a local file under name (streamed from disk by the driver)."""
+        self.driver.upload_object(str(path), self.container, name, verify_hash=False)
+
+    def stream(self, name: str) -> Iterator[bytes]:
+        """Yield the stored object in chunks."""
+        obj = self.driver.get_object(self.container_name, name)
+        yield from self.driver.download_object_as_stream(obj, chunk_size=CHUNK)
+
+    def lines(self, name: str) -> Iterator[str]:
+        """Yield a stored text object line by line, without holding it whole in memory."""
+        pending = b""
+        for chunk in self.stream(name):
+            pending += chunk
+            *complete, pending = pending.split(b"\n")
+            for line in complete:
+                yield line.decode("utf-8", "replace")
+        if pending:
+            yield pending.decode("utf-8", "replace")
+
+
+def _driver(config: Config) -> StorageDriver:
+    if config.artifact_store == "local":
+        config.artifact_dir.mkdir(parents=True, exist_ok=True)
+        return get_driver("local")(str(config.artifact_dir))  # type: ignore[no-any-return]
+    try:
+        cls = get_driver(config.artifact_store)
+    except AttributeError:
+        raise CloudSimError(
+            f"CLOUDSIM_ARTIFACT_STORE: libcloud has no storage provider {config.artifact_store!r}"
+        ) from None
+    options: dict[str, Any] = dict(config.artifact_options)
+    return cls(config.artifact_key, config.artifact_secret, **options)  # type: ignore[no-any-return]
+
+
+def file_sha256(path: Path) -> str:
+    """Return a local file's SHA-256, read in chunks."""
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        while chunk := handle.read(CHUNK):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def remote_sha256(executor: SSHExecutor, target: Target, path: str) -> str | None:
+    """Return the SHA-256 of a file on a machine, None when the file is not there."""
+    quoted = shlex.quote(path)
+    result = executor.run(target, f"if test -f {quoted}; then sha256sum {quoted}; fi", timeout=3600)
+    text = result.stdout.strip()
+    return text.split()[0] if text else None
+
+
+def snapshot_bandwidth_log(executor: SSHExecutor, router: Target, run_id: int) -> None:
+    """Copy the router's bandwidth log beside the run's other logs, once (the router starts a
+    new one at the next arm)."""
+    folder = run_dir(run_id)
+    final = shlex.quote(f"{folder}/bandwidth.jsonl")
+    partial = shlex.quote(f"{folder}/.bandwidth.jsonl.part")
+    executor.run(
+        router,
+        f"mkdir -p {shlex.quote(folder)} && (test -f {final} || "
+        f"(cp {shlex.quote(BANDWIDTH_LOG)} {partial} && mv {partial} {final}))",
+        timeout=600,
+    )
+
+
+def collect_logs(
+    run: Run,
+    executor: SSHExecutor,
+    reach: dict[str, Target],
+    store: LogStore,
+    staging: Path,
+    log: Callable[[str], None],
+) -> list[str]:
+    """Copy each of the run's logs into the store unless it is there already with the same
+    checksum; return the problems with logs that could not be copied (missing optional logs
+    are no problem)."""
+    staging.mkdir(parents=True, exist_ok=True)
+    problems = []
+    stored = {a.filename: a for a in run.artifacts}
+    for remote in RUN_LOGS:
+        target = reach[remote.machine]
+        path = f"{run_dir(run.id)}/{remote.filename}"
+        try:
+            checksum = remote_sha256(executor, target, path)
+            if checksum is None:
+                if remote.required:
+                    problems.append(f"{remote.filename}: not found on {remote.machine}")
+                log(f"{remote.filename}: not on {remote.machine}")
+                continue
+            name = store.object_name(run.id, remote.filename)
+            artifact = stored.get(remote.filename)
+            if (
+                artifact is not None
+                and artifact.sha256 == checksum
+                and store.holds(name, artifact.size)
+            ):
+                log(f"{remote.filename}: stored already ({checksum[:12]})")
+                continue
+            size = _fetch(executor, target, path, staging / remote.filename, checksum)
+            store.put(staging / remote.filename, name)
+        except (SSHError, LogCollectionError, OSError) as exc:
+            problems.append(f"{remote.filename}: {exc}")
+            log(f"{remote.filename}: {exc}")
+            continue
+        if artifact is None:
+            artifact = Artifact(run_id=run.id, filename=remote.filename, kind=remote.kind)
+            db.session.add(artifact)
+        artifact.location = name
+        artifact.sha256 = checksum
+        artifact.size = size
+        db.session.commit()
+        (staging / remote.filename).unlink()
+        log(f"{remote.filename}: {size} bytes, sha256 {checksum[:12]} verified and stored")
+    return problems
+
+
+def _fetch(executor: SSHExecutor, target: Target, path: str, local: Path, expected: str) -> int:
+    """Download unless a staged copy with the expected checksum is there from a previous try."""
+    if local.exists() and file_sha256(local) == expected:
+        return local.stat().st_size
+    transfer = executor.get_file(target, path, local)
+    if transfer.sha256 != expected:
+        local.unlink(missing_ok=True)
+        raise LogCollectionError(
+            f"checksum mismatch: {target.name} has {expected[:12]}, received {transfer.sha256[:12]}"
+        )
+    return transfer.size
+
+
+def artifact_for(run: Run, filename: str) -> Artifact | None:
+    """Return the run's stored log of that name."""
+    return db.session.scalar(
+        select(Artifact).where(Artifact.run_id == run.id, Artifact.filename == filename)
+    )

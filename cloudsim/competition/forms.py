@@ -1,0 +1,82 @@
+"""Forms officers schedule and import tasks with."""
+
+from __future__ import annotations
+
+from flask_wtf import FlaskForm
+from flask_wtf.file import FileField
+from wtforms import (
+    DateTimeLocalField,
+    IntegerField,
+    SelectChoice,
+    SelectField,
+    StringField,
+    TextAreaField,
+)
+from wtforms.validators import DataRequired, InputRequired, Length, NumberRange, Optional
+
+from cloudsim.competition.schedule import (
+    DEFAULT_DOWNLINK_BITS,
+    DEFAULT_LATENCY_MS,
+    DEFAULT_TIMEOUT_S,
+    DEFAULT_UPLINK_BITS,
+)
+from cloudsim.competition.worlds import worlds
+from cloudsim.models import Team
+
+ALL_TEAMS = "all"
+LOCAL_FORMAT = ["%Y-%m-%dT%H:%M", "%Y-%m-%dT%H:%M:%S"]
+
+
+class ScheduleForm(FlaskForm):
+    """A task for one team or every team, its window in the officer's time zone."""
+
+    name = StringField("Name", validators=[DataRequired(), Length(max=120)])
+    team = SelectField("Team")
+    world = SelectField("World")
+    run_config = IntegerField("Run configuration", default=1, validators=[InputRequired()])
+    time_zone = StringField("Time zone", default="UTC", validators=[DataRequired()])
+    window_start = DateTimeLocalField(
+        "Window opens", format=LOCAL_FORMAT, validators=[InputRequired()]
+    )
+    window_stop = DateTimeLocalField(
+        "Window closes", format=LOCAL_FORMAT, validators=[InputRequired()]
+    )
+    timeout_s = IntegerField(
+        "Timeout (s)", default=DEFAULT_TIMEOUT_S, validators=[InputRequired(), NumberRange(1)]
+    )
+    latency_ms = IntegerField(
+        "Latency each way (ms)", default=DEFAULT_LATENCY_MS, validators=[InputRequired()]
+    )
+    uplink_bits = IntegerField(
+        "Uplink cap (bits)", default=DEFAULT_UPLINK_BITS, validators=[InputRequired()]
+    )
+    downlink_bits = IntegerField(
+        "Downlink cap (bits)", default=DEFAULT_DOWNLINK_BITS, validators=[InputRequired()]
+    )
+    order = IntegerField("Order", default=0, validators=[Optional()])
+
+    def offer(self, teams: list[Team]) -> ScheduleForm:
+        """Fill the choices."""
+        self.team.choices = [SelectChoice(ALL_TEAMS, "— every team —")] + [
+            SelectChoice(str(t.id), t.name) for t in teams
+        ]
+        self.world.choices = [SelectChoice(w.name, w.title) for w in worlds().values()]
+        return self
+
+    def team_ids(self) -> list[int] | None:
+        """Return the chosen team's id in a list, or None for every team."""
+        return None if self.team.data == ALL_TEAMS else [int(self.team.data)]
+
+
+class ImportForm(FlaskForm):
+    """A season's schedule as YAML, uploaded or pasted."""
+
+    schedule_file = FileField("YAML file")
+    schedule_text = TextAreaField("or paste it here", validators=[Length(max=1_000_000)])
+
+    def text(self) -> str:
+        """Return the uploaded file's text, else the pasted text."""
+        upload = self.schedule_file.data
+        if upload is not None and getattr(upload, "filename", None):
+            return str(upload.read().decode("utf-8", "replace"))
+        return str(self.schedule_text.data or "")

@@ -1,0 +1,203 @@
+"""Start, stop and look at runs, and rank the teams; every rule checked here for every caller."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+from flask import current_app
+from sqlalchemy import Select, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import selectinload
+
+from cloudsim.audit.service import record
+from cloudsim.auth.policy import require_team_access
+from cloudsim.competition.scoring import RunResult, Standing, rank
+from cloudsim.errors import Conflict, Forbidden, NotFound
+from cloudsim.extensions import db
+from cloudsim.jobs.service import enqueue
+from cloudsim.models import (
+    Constellation,
+    ConstellationState,
+    Role,
+    Run,
+    RunState,
+    Task,
+    Team,
+    User,
+    utcnow,
+)
+
+LIVE = (RunState.STARTING, RunState.RUNNING, RunState.STOPPING)
+RUNNABLE_KINDS = ("vrc", "simple")
+NOT_OPEN = "no task with that id is open for your team now"
+
+
+def start_run(actor: User | None, task_id: int, constellation_id: int | None = None) -> Run:
+    """Start a run of an open task on the team's ready constellation (the team, or officers)."""
+    task = db.session.get(Task, task_id)
+    is_team_user = actor is not None and not actor.has_role(Role.OFFICER)
+    if task is None or (is_team_user and actor is not None and actor.team_id != task.team_id):
+        if is_team_user:
+            raise Forbidden(NOT_OPEN)
+        raise NotFound(f"task {task_id} not found")
+    now = utcnow()
+    if now < task.window_start:
+        raise Forbidden(NOT_OPEN if is_team_user else f"the window of {task.name} is not open")
+    if now >= task.window_stop:
+        raise Forbidden(
+            f"the window of {task.name} closed at {task.window_stop:%Y-%m-%d %H:%M} UTC"
+        )
+    done = db.session.scalar(
+        select(Run.id).where(Run.task_id == task.id, Run.state.in_((*LIVE, RunState.FINISHED)))
+    )
+    if done is not None:
+        raise Conflict(f"{task.name} has been run already (run {done})")
+    constellation = _constellation_for(task, constellation_id)
+    run = Run(
+        task_id=task.id,
+        team_id=task.team_id,
+        constellation_id=constellation.id,
+        active_constellation_id=constellation.id,
+        started_by_id=actor.id if actor else None,
+        state=RunState.STARTING,
+    )
+    db.session.add(run)
+    try:
+        db.session.flush()
+    except IntegrityError:
+        db.session.rollback()
+        raise Conflict(f"{constellation.name} is busy with another run") from None
+    record(
+        "run.start",
+        actor,
+        target_type="run",
+        target_id=run.id,
+        team_id=task.team_id,
+        task=task.name,
+        constellation=constellation.name,
+    )
+    db.session.commit()
+    enqueue("run.start", actor, target_type="run", target_id=run.id, team_id=run.team_id)
+    return run
+
+
+def _constellation_for(task: Task, constellation_id: int | None) -> Constellation:
+    query = select(Constellation).where(
+        Constellation.team_id == task.team_id, Constellation.kind.in_(RUNNABLE_KINDS)
+    )
+    if constellation_id is not None:
+        query = query.where(Constellation.id == constellation_id)
+    candidates = list(db.session.scalars(query.order_by(Constellation.id)))
+    if not candidates:
+        raise Conflict("the team has no constellation to run on; ask an admin to launch one")
+    ready = [c for c in candidates if c.state == ConstellationState.READY]
+    if not ready:
+        states = ", ".join(f"{c.name} is {c.state.value}" for c in candidates)
+        raise Conflict(f"no ready constellation: {states}")
+    busy = set(
+        db.session.scalars(
+            select(Run.active_constellation_id).where(
+                Run.active_constellation_id.in_([c.id for c in ready])
+            )
+        )
+    )
+    free = [c for c in ready if c.id not in busy]
+    if not free:
+        raise Conflict(f"{ready[0].name} is busy with another run; one run at a time")
+    return free[0]
+
+
+def stop_run(actor: User | None, run_id: int) -> Run:
+    """Ask a live run to stop (its team, or officers); safe to repeat."""
+    run = get_run(actor, run_id)
+    if run.state not in LIVE:
+        raise Conflict(f"run {run.id} is {run.state.value}")
+    if run.stop_reason is None:
+        record("run.stop", actor, target_type="run", target_id=run.id, team_id=run.team_id)
+    request_stop(run, "stopped")
+    return run
+
+
+def request_stop(run: Run, reason: str) -> bool:
+    """Record why a run ends and start its stop job once; return whether this call started it.
+
+    A run still starting is stopped by its start job when it gets there.
+    """
+    db.session.execute(
+        update(Run)
+        .where(Run.id == run.id, Run.stop_reason.is_(None))
+        .values(stop_reason=reason)
+        .execution_options(synchronize_session=False)
+    )
+    moved = db.session.execute(
+        update(Run)
+        .where(Run.id == run.id, Run.state == RunState.RUNNING)
+        .values(state=RunState.STOPPING)
+        .execution_options(synchronize_session=False)
+    )
+    db.session.commit()
+    db.session.refresh(run)
+    if moved.rowcount != 1:  # type: ignore[attr-defined]
+        return False
+    enqueue("run.stop", None, target_type="run", target_id=run.id, team_id=run.team_id)
+    return True
+
+
+def get_run(actor: User | None, run_id: int) -> Run:
+    """Return a run the actor may see."""
+    run = db.session.get(Run, run_id)
+    if run is None:
+        raise NotFound(f"run {run_id} not found")
+    require_team_access(actor, run.team_id)
+    return run
+
+
+def visible_runs(actor: User | None) -> Select[Run]:
+    """Return a query for the runs the actor may see, newest first."""
+    query = (
+        select(Run)
+        .options(selectinload(Run.task), selectinload(Run.team))
+        .order_by(Run.started_at.desc(), Run.id.desc())
+    )
+    if actor is not None and not actor.has_role(Role.OFFICER):
+        query = query.where(Run.team_id == actor.team_id, Run.team_id.is_not(None))
+    return query
+
+
+def live_run(team_id: int) -> Run | None:
+    """Return the team's live run, if any."""
+    return db.session.scalar(
+        select(Run).where(Run.team_id == team_id, Run.state.in_(LIVE)).order_by(Run.id.desc())
+    )
+
+
+def leaderboard(actor: User | None) -> list[Standing]:
+    """Return the ranking of every team over their finished runs, as much as the actor may see."""
+    policy = current_app.config["CLOUDSIM"].leaderboard_for_users
+    team_user = actor is not None and not actor.has_role(Role.OFFICER)
+    if team_user and policy == "none":
+        raise Forbidden("the leaderboard is shown to officers only")
+    results: dict[tuple[int, str], list[RunResult]] = defaultdict(list)
+    for team in db.session.scalars(select(Team)):
+        results[(team.id, team.name)] = []
+    finished = db.session.scalars(
+        select(Run)
+        .where(Run.state == RunState.FINISHED)
+        .options(selectinload(Run.task), selectinload(Run.team))
+    )
+    for run in finished:
+        results[(run.team_id, run.team.name)].append(
+            RunResult(
+                checkpoints=run.score,
+                uplink_cap_bits=run.task.uplink_bits,
+                uplink_used_bits=run.uplink_bits_used,
+                timeout_s=run.task.timeout_s,
+                sim_seconds=run.sim_seconds,
+                complete=run.end_reason == "complete",
+            )
+        )
+    standings = rank(results)
+    if team_user and policy == "own":
+        assert actor is not None
+        standings = [s for s in standings if s.team_id == actor.team_id]
+    return standings

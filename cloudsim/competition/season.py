@@ -1,0 +1,237 @@
+"""A season's schedule as YAML: teams x a sequence of tasks, imported and exported again.
+
+time_zone: America/Los_Angeles      # how the windows below are written
+teams: [Team A, Team B]             # who runs the tasks; left out: every team
+tasks:
+  - name: Driving, run 1
+    world: vrc_task_1
+    config: 1
+    start: 2026-06-17 09:00
+    stop: 2026-06-17 12:00
+    timeout_s: 1800
+    latency_ms: 250
+    uplink_bits: 115200
+    downlink_bits: 59000000
+    order: 1
+    teams: [Team A]                 # optional: this task for these teams only
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from datetime import datetime
+from typing import Any
+
+import yaml
+from sqlalchemy import select
+
+from cloudsim.audit.service import record
+from cloudsim.auth.policy import require_role
+from cloudsim.competition.schedule import (
+    DEFAULT_DOWNLINK_BITS,
+    DEFAULT_LATENCY_MS,
+    DEFAULT_TIMEOUT_S,
+    DEFAULT_UPLINK_BITS,
+    TaskSpec,
+    add_task,
+    check_spec,
+    in_zone,
+    to_utc,
+    visible_tasks,
+    zone,
+)
+from cloudsim.errors import InvalidInput, NotFound
+from cloudsim.extensions import db
+from cloudsim.models import Role, Task, Team, User
+
+MAX_TASKS = 1000
+TASK_KEYS = {
+    "name",
+    "world",
+    "config",
+    "start",
+    "stop",
+    "timeout_s",
+    "latency_ms",
+    "uplink_bits",
+    "downlink_bits",
+    "order",
+    "teams",
+    "time_zone",
+}
+
+
+def parse_season(text: str) -> tuple[list[tuple[TaskSpec, list[str] | None]], str]:
+    """Read a season document into (spec, team names or None for all) pairs and its zone."""
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise InvalidInput(f"the schedule is not valid YAML: {exc}") from None
+    if not isinstance(document, dict) or not isinstance(document.get("tasks"), list):
+        raise InvalidInput("the schedule must be a mapping with a 'tasks' list")
+    unknown = set(document) - {"time_zone", "teams", "tasks"}
+    if unknown:
+        raise InvalidInput(f"unknown schedule keys: {', '.join(sorted(map(str, unknown)))}")
+    zone_name = str(document.get("time_zone") or "UTC")
+    zone(zone_name)
+    default_teams = _team_names(document.get("teams"), "teams")
+    if len(document["tasks"]) > MAX_TASKS:
+        raise InvalidInput(f"a schedule holds at most {MAX_TASKS} tasks")
+    entries = []
+    for number, item in enumerate(document["tasks"], start=1):
+        try:
+            entries.append(_entry(item, zone_name, default_teams))
+        except InvalidInput as exc:
+            raise InvalidInput(f"task {number}: {exc}") from None
+    return entries, zone_name
+
+
+def _entry(
+    item: Any, zone_name: str, default_teams: list[str] | None
+) -> tuple[TaskSpec, list[str] | None]:
+    if not isinstance(item, dict):
+        raise InvalidInput("each task must be a mapping")
+    unknown = set(item) - TASK_KEYS
+    if unknown:
+        raise InvalidInput(f"unknown keys {', '.join(sorted(map(str, unknown)))}")
+    missing = [k for k in ("name", "world", "start", "stop") if k not in item]
+    if missing:
+        raise InvalidInput(f"missing {', '.join(missing)}")
+    task_zone = str(item.get("time_zone") or zone_name)
+    try:
+        spec = TaskSpec(
+            name=str(item["name"]),
+            world=str(item["world"]),
+            run_config=_whole(item.get("config", 1), "config"),
+            window_start=to_utc(_text(item["start"]), task_zone),
+            window_stop=to_utc(_text(item["stop"]), task_zone),
+            timeout_s=_whole(item.get("timeout_s", DEFAULT_TIMEOUT_S), "timeout_s"),
+            latency_ms=_whole(item.get("latency_ms", DEFAULT_LATENCY_MS), "latency_ms"),
+            uplink_bits=_whole(item.get("uplink_bits", DEFAULT_UPLINK_BITS), "uplink_bits"),
+            downlink_bits=_whole(item.get("downlink_bits", DEFAULT_DOWNLINK_BITS), "downlink_bits"),
+            order=_whole(item.get("order", 0), "order"),
+            time_zone=task_zone,
+        )
+    except InvalidInput as exc:
+        raise InvalidInput(f"{item.get('name', '?')}: {exc}") from None
+    teams = _team_names(item["teams"], "teams") if "teams" in item else default_teams
+    return check_spec(spec), teams
+
+
+def _text(value: Any) -> str:
+    # YAML reads an unquoted 2026-06-17 09:00:00 as a naive datetime; keep it wall-clock text
+    return value.isoformat(sep=" ") if hasattr(value, "isoformat") else str(value)
+
+
+def _whole(value: Any, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | str):
+        raise InvalidInput(f"{name} must be a whole number")
+    try:
+        return int(value)
+    except ValueError:
+        raise InvalidInput(f"{name} must be a whole number, got {value!r}") from None
+
+
+def _team_names(value: Any, name: str) -> list[str] | None:
+    if value is None or value == "all":
+        return None
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value) or not value:
+        raise InvalidInput(f"{name} must be 'all' or a list of team names")
+    return value
+
+
+def import_season(actor: User | None, text: str) -> list[Task]:
+    """Schedule every task of a season document; tasks already scheduled are left alone."""
+    require_role(actor, Role.OFFICER, "import schedules")
+    entries, _ = parse_season(text)
+    all_teams = list(db.session.scalars(select(Team).order_by(Team.name)))
+    by_name = {t.name.lower(): t for t in all_teams}
+    existing = {
+        (t.team_id, t.name, t.window_start, t.world, t.run_config)
+        for t in db.session.scalars(select(Task))
+    }
+    planned = []
+    for spec, names in entries:
+        if names is None:
+            teams = all_teams
+        else:
+            teams = []
+            for team_name in names:
+                team = by_name.get(team_name.strip().lower())
+                if team is None:
+                    raise NotFound(f"{spec.name}: no team named {team_name!r}")
+                teams.append(team)
+        planned += [(spec, team) for team in teams]
+    created = []
+    for spec, team in planned:
+        key = (team.id, spec.name, spec.window_start, spec.world, spec.run_config)
+        if key not in existing:
+            existing.add(key)
+            created.append(add_task(actor, spec, team))
+    record("schedule.import", actor, tasks=len(entries), created=len(created))
+    db.session.commit()
+    return created
+
+
+def export_season(actor: User | None, zone_name: str | None = None) -> str:
+    """Write every scheduled task as a season document (the same task for several teams once)."""
+    require_role(actor, Role.OFFICER, "export schedules")
+    tasks = list(db.session.scalars(visible_tasks(actor)))
+    all_names = sorted(t.name for t in db.session.scalars(select(Team)))
+    zones = {t.time_zone for t in tasks}
+    document_zone = zone_name or (zones.pop() if len(zones) == 1 else "UTC")
+    zone(document_zone)
+    groups: dict[tuple[Any, ...], list[str]] = defaultdict(list)
+    for task in tasks:
+        groups[_spec_key(task)].append(task.team.name)
+    entries = []
+    for key, names in groups.items():
+        entry = _entry_of(dict(zip(SPEC_FIELDS, key, strict=True)), document_zone)
+        if sorted(names) != all_names:
+            entry["teams"] = sorted(names)
+        entries.append(entry)
+    document = {"time_zone": document_zone, "tasks": entries}
+    return yaml.safe_dump(document, sort_keys=False, allow_unicode=True)
+
+
+SPEC_FIELDS = (
+    "name",
+    "world",
+    "run_config",
+    "window_start",
+    "window_stop",
+    "timeout_s",
+    "latency_ms",
+    "uplink_bits",
+    "downlink_bits",
+    "order",
+    "time_zone",
+)
+
+
+def _spec_key(task: Task) -> tuple[Any, ...]:
+    return tuple(getattr(task, name) for name in SPEC_FIELDS)
+
+
+def _entry_of(spec: dict[str, Any], document_zone: str) -> dict[str, Any]:
+    task_zone = spec["time_zone"]
+    entry: dict[str, Any] = {
+        "name": spec["name"],
+        "world": spec["world"],
+        "config": spec["run_config"],
+        "start": _wall_clock(spec["window_start"], task_zone),
+        "stop": _wall_clock(spec["window_stop"], task_zone),
+        "timeout_s": spec["timeout_s"],
+        "latency_ms": spec["latency_ms"],
+        "uplink_bits": spec["uplink_bits"],
+        "downlink_bits": spec["downlink_bits"],
+        "order": spec["order"],
+    }
+    if task_zone != document_zone:
+        entry["time_zone"] = task_zone
+    return entry
+
+
+def _wall_clock(value: datetime, zone_name: str) -> str:
+    local = in_zone(value, zone_name)
+    return local.strftime("%Y-%m-%d %H:%M" + (":%S" if local.second else ""))

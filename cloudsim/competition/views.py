@@ -1,0 +1,241 @@
+"""Pages of the competition: tasks (schedule, import, export, start), runs live, leaderboard."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any
+
+from flask import (
+    Blueprint,
+    Response,
+    current_app,
+    flash,
+    jsonify,
+    redirect,
+    render_template,
+    url_for,
+)
+from flask.typing import ResponseReturnValue
+from flask_login import current_user, login_required
+
+from cloudsim.auth.forms import ConfirmForm
+from cloudsim.auth.policy import role_required
+from cloudsim.competition import runs as run_service
+from cloudsim.competition import schedule, season
+from cloudsim.competition.artifacts import LogStore
+from cloudsim.competition.forms import ImportForm, ScheduleForm
+from cloudsim.competition.plots import bandwidth_charts, read_bandwidth_log, score_chart
+from cloudsim.errors import CloudSimError, NotFound
+from cloudsim.extensions import db
+from cloudsim.models import Artifact, Role, Run, User
+from cloudsim.people.service import visible_teams
+
+bp = Blueprint("competition", __name__)
+
+
+def _tasks_page(form: ScheduleForm, import_form: ImportForm, status: int = 200) -> Any:
+    tasks = db.session.scalars(schedule.visible_tasks(current_user)).all()
+    return render_template(
+        "competition/tasks.html",
+        tasks=tasks,
+        open_ids={t.id for t in schedule.open_tasks(current_user)},
+        form=form,
+        import_form=import_form,
+        confirm=ConfirmForm(),
+    ), status
+
+
+@bp.route("/tasks")
+@login_required
+def tasks() -> ResponseReturnValue:
+    return _tasks_page(ScheduleForm().offer(visible_teams(current_user)), ImportForm())
+
+
+@bp.route("/tasks", methods=["POST"])
+@role_required(Role.OFFICER)
+def schedule_task() -> ResponseReturnValue:
+    form = ScheduleForm().offer(visible_teams(current_user))
+    if form.validate_on_submit():
+        try:
+            spec = schedule.TaskSpec(
+                name=form.name.data or "",
+                world=form.world.data or "",
+                run_config=form.run_config.data or 0,
+                window_start=schedule.to_utc(form.window_start.data, form.time_zone.data or ""),
+                window_stop=schedule.to_utc(form.window_stop.data, form.time_zone.data or ""),
+                timeout_s=form.timeout_s.data or 0,
+                latency_ms=form.latency_ms.data or 0,
+                uplink_bits=form.uplink_bits.data or 0,
+                downlink_bits=form.downlink_bits.data or 0,
+                order=form.order.data or 0,
+                time_zone=(form.time_zone.data or "").strip(),
+            )
+            created = schedule.schedule(current_user, spec, form.team_ids())
+        except CloudSimError as exc:
+            db.session.rollback()
+            form.form_errors.append(str(exc))
+            return _tasks_page(form, ImportForm(), exc.status)
+        flash(f"Scheduled {created[0].name} for {len(created)} team(s).", "info")
+        return redirect(url_for("competition.tasks"))
+    return _tasks_page(form, ImportForm(), 400)
+
+
+@bp.route("/tasks/<int:task_id>/delete", methods=["POST"])
+@role_required(Role.OFFICER)
+def delete_task(task_id: int) -> ResponseReturnValue:
+    if not ConfirmForm().validate_on_submit():
+        return redirect(url_for("competition.tasks")), 400
+    schedule.delete_task(current_user, task_id)
+    flash("Task deleted.", "info")
+    return redirect(url_for("competition.tasks"))
+
+
+@bp.route("/tasks/import", methods=["POST"])
+@role_required(Role.OFFICER)
+def import_schedule() -> ResponseReturnValue:
+    form = ImportForm()
+    if form.validate_on_submit():
+        try:
+            created = season.import_season(current_user, form.text())
+        except CloudSimError as exc:
+            db.session.rollback()
+            form.form_errors.append(str(exc))
+            return _tasks_page(ScheduleForm().offer(visible_teams(current_user)), form, exc.status)
+        flash(f"Imported the schedule: {len(created)} new task(s).", "info")
+        return redirect(url_for("competition.tasks"))
+    return _tasks_page(ScheduleForm().offer(visible_teams(current_user)), form, 400)
+
+
+@bp.route("/tasks/export")
+@role_required(Role.OFFICER)
+def export_schedule() -> ResponseReturnValue:
+    return Response(
+        season.export_season(current_user),
+        mimetype="application/yaml",
+        headers={"Content-Disposition": 'attachment; filename="schedule.yaml"'},
+    )
+
+
+@bp.route("/tasks/<int:task_id>/start", methods=["POST"])
+@login_required
+def start(task_id: int) -> ResponseReturnValue:
+    if not ConfirmForm().validate_on_submit():
+        return redirect(url_for("competition.tasks")), 400
+    run = run_service.start_run(current_user, task_id)
+    flash(f"Run {run.id} is starting.", "info")
+    return redirect(url_for("competition.run", run_id=run.id))
+
+
+@bp.route("/runs")
+@login_required
+def runs() -> ResponseReturnValue:
+    shown = db.session.scalars(run_service.visible_runs(current_user).limit(200)).all()
+    return render_template("competition/runs.html", runs=shown)
+
+
+@bp.route("/runs/<int:run_id>")
+@login_required
+def run(run_id: int) -> ResponseReturnValue:
+    shown = run_service.get_run(current_user, run_id)
+    return render_template(
+        "competition/run.html",
+        run=shown,
+        charts=_charts(shown),
+        bits_left=_bits_left(shown),
+        confirm=ConfirmForm(),
+    )
+
+
+def _charts(run: Run) -> list[Any]:
+    events = [(e.sim_time, e.kind, _score_after(run, e.sim_time)) for e in run.score_events]
+    charts = [score_chart(events, run.sim_seconds)]
+    bandwidth = next((a for a in run.artifacts if a.filename == "bandwidth.jsonl"), None)
+    if bandwidth is not None:
+        store = LogStore(current_app.config["CLOUDSIM"])
+        charts += bandwidth_charts(read_bandwidth_log(store.lines(bandwidth.location)))
+    return charts
+
+
+def _score_after(run: Run, sim_time: float) -> int:
+    return sum(e.points for e in run.score_events if e.sim_time <= sim_time)
+
+
+def _bits_left(run: Run) -> dict[str, int]:
+    return {
+        "uplink": max(0, run.task.uplink_bits - run.uplink_bits_used),
+        "downlink": max(0, run.task.downlink_bits - run.downlink_bits_used),
+    }
+
+
+@bp.route("/runs/<int:run_id>/status")
+@login_required
+def run_status(run_id: int) -> ResponseReturnValue:
+    """Return the run's state and score, for the page's live updates."""
+    shown = run_service.get_run(current_user, run_id)
+    return jsonify(
+        id=shown.id,
+        state=shown.state.value,
+        score=shown.score,
+        falls=shown.falls,
+        sim_seconds=round(shown.sim_seconds, 2),
+        end_reason=shown.end_reason,
+        error=shown.error,
+    )
+
+
+@bp.route("/runs/<int:run_id>/stop", methods=["POST"])
+@login_required
+def stop(run_id: int) -> ResponseReturnValue:
+    if not ConfirmForm().validate_on_submit():
+        return redirect(url_for("competition.run", run_id=run_id)), 400
+    run_service.stop_run(current_user, run_id)
+    flash("Stopping the run.", "info")
+    return redirect(url_for("competition.run", run_id=run_id))
+
+
+@bp.route("/runs/<int:run_id>/logs/<int:artifact_id>")
+@login_required
+def download(run_id: int, artifact_id: int) -> ResponseReturnValue:
+    artifact = log_of(current_user, run_id, artifact_id)
+    store = LogStore(current_app.config["CLOUDSIM"])
+    return Response(
+        store.stream(artifact.location),
+        mimetype="application/octet-stream",
+        headers={
+            "Content-Disposition": f'attachment; filename="run-{run_id}-{artifact.filename}"',
+            "Content-Length": str(artifact.size),
+            "X-Checksum-SHA256": artifact.sha256,
+        },
+    )
+
+
+def log_of(actor: User, run_id: int, artifact_id: int) -> Artifact:
+    """Return a stored log of a run the actor may see."""
+    run = run_service.get_run(actor, run_id)
+    artifact = db.session.get(Artifact, artifact_id)
+    if artifact is None or artifact.run_id != run.id:
+        raise NotFound(f"log {artifact_id} of run {run_id} not found")
+    return artifact
+
+
+@bp.route("/leaderboard")
+@login_required
+def leaderboard() -> ResponseReturnValue:
+    return render_template(
+        "competition/leaderboard.html", standings=run_service.leaderboard(current_user)
+    )
+
+
+@bp.app_template_global("competition_now")
+def competition_now(user: User) -> dict[str, Any]:
+    """Return what a dashboard shows of the competition: open tasks and the live run."""
+    if user.team_id is None and not user.has_role(Role.OFFICER):
+        return {"open": [], "live": None}
+    live = run_service.live_run(user.team_id) if user.team_id is not None else None
+    return {"open": schedule.open_tasks(user, user.team_id), "live": live}
+
+
+@bp.app_template_filter("in_zone")
+def in_zone_filter(value: datetime, zone_name: str) -> str:
+    """Show a UTC time as wall-clock time in a zone."""
+    return schedule.in_zone(value, zone_name).strftime("%Y-%m-%d %H:%M")

@@ -1,0 +1,96 @@
+"""Competition rows for tests: an open task, a finished run with a stored log."""
+
+from __future__ import annotations
+
+import itertools
+from datetime import timedelta
+from pathlib import Path
+
+from flask import current_app
+from sqlalchemy import update
+
+from cloudsim.competition.artifacts import LogStore, file_sha256
+from cloudsim.extensions import db
+from cloudsim.models import (
+    Artifact,
+    Constellation,
+    ConstellationState,
+    Run,
+    RunState,
+    Task,
+    utcnow,
+)
+
+_names = itertools.count(1)
+SCORE_LOG = (
+    '{"event": "run_start", "score": 0, "sim_time": 0.0, "wall_time": 1795337764.0}\n'
+    '{"checkpoint": 1, "event": "checkpoint", "name": "gate", "points": 1, "score": 1, '
+    '"sim_time": 5.0, "wall_time": 1795337765.0}\n'
+)
+
+
+def open_task(team_id: int, minutes: int = 30, **fields: object) -> Task:
+    """Add a task of the team whose window is open now."""
+    now = utcnow()
+    values: dict[str, object] = dict(
+        team_id=team_id,
+        name=f"Task {next(_names)}",
+        world="vrc_task_2",
+        run_config=1,
+        window_start=now - timedelta(minutes=1),
+        window_stop=now + timedelta(minutes=minutes),
+        uplink_bits=1_000_000,
+        downlink_bits=8_000_000,
+    )
+    values.update(fields)
+    task = Task(**values)
+    db.session.add(task)
+    db.session.commit()
+    return task
+
+
+def finished_run(task: Task, constellation_id: int | None, tmp: Path, score: int = 1) -> Run:
+    """Add a finished run of the task with its score log stored as an artifact."""
+    run = Run(
+        task_id=task.id,
+        team_id=task.team_id,
+        constellation_id=constellation_id,
+        state=RunState.FINISHED,
+        score=score,
+        end_reason="time_limit",
+        finished_at=utcnow(),
+    )
+    db.session.add(run)
+    db.session.flush()
+    path = tmp / f"score-{run.id}.jsonl"
+    path.write_text(SCORE_LOG)
+    store = LogStore(current_app.config["CLOUDSIM"])
+    name = store.object_name(run.id, "score.jsonl")
+    store.put(path, name)
+    db.session.add(
+        Artifact(
+            run_id=run.id,
+            kind="score",
+            filename="score.jsonl",
+            location=name,
+            size=path.stat().st_size,
+            sha256=file_sha256(path),
+        )
+    )
+    db.session.commit()
+    return run
+
+
+def ready_constellation(constellation_id: int) -> None:
+    """Make the constellation ready and free again (whatever earlier visits did to it)."""
+    db.session.execute(
+        update(Run)
+        .where(Run.active_constellation_id.is_not(None))
+        .values(active_constellation_id=None, state=RunState.ERROR)
+    )
+    db.session.execute(
+        update(Constellation)
+        .where(Constellation.id == constellation_id)
+        .values(state=ConstellationState.READY)
+    )
+    db.session.commit()

@@ -1,0 +1,134 @@
+"""The server's rules for starting and stopping runs, for every caller, and the leaderboard."""
+
+from __future__ import annotations
+
+from datetime import timedelta
+from pathlib import Path
+
+import pytest
+from flask import Flask
+
+from cloudsim.competition import runs
+from cloudsim.errors import Conflict, Forbidden
+from cloudsim.extensions import db
+from cloudsim.models import Constellation, ConstellationState, Job, RunState, Team, User, utcnow
+from tests.competition.support import finished_run, open_task
+from tests.conftest import log_in, token_for
+
+
+@pytest.fixture
+def constellation(app: Flask, team_a: Team) -> Constellation:
+    made = Constellation(
+        name="a-vrc", kind="vrc", provider="local", team_id=team_a.id, state=ConstellationState.READY
+    )
+    db.session.add(made)
+    db.session.commit()
+    return made
+
+
+def test_a_team_user_starts_their_open_task_and_a_start_job_follows(
+    app: Flask, people: dict[str, User | None], team_a: Team, constellation: Constellation
+) -> None:
+    task = open_task(team_a.id)
+    run = runs.start_run(people["user_a"], task.id)
+    assert run.state == RunState.STARTING and run.constellation_id == constellation.id
+    job = db.session.query(Job).filter_by(target_type="run", target_id=run.id).one()
+    assert job.kind == "run.start" and job.team_id == team_a.id
+    with pytest.raises(Conflict, match="busy"):
+        runs.start_run(people["user_a"], open_task(team_a.id).id)
+    with pytest.raises(Conflict, match="run already"):
+        runs.start_run(people["officer"], task.id)
+
+
+def test_the_api_refuses_starts_outside_the_window_or_by_another_team(
+    app: Flask, people: dict[str, User | None], team_a: Team, constellation: Constellation
+) -> None:
+    client = app.test_client()
+    user_a, user_b = token_for(people["user_a"]), token_for(people["user_b"])  # type: ignore[arg-type]
+    later = open_task(
+        team_a.id,
+        window_start=utcnow() + timedelta(hours=1),
+        window_stop=utcnow() + timedelta(hours=2),
+    )
+    closed = open_task(
+        team_a.id,
+        window_start=utcnow() - timedelta(hours=2),
+        window_stop=utcnow() - timedelta(hours=1),
+    )
+    task = open_task(team_a.id)
+    not_yet = client.post(f"/api/v1/tasks/{later.id}/runs", json={}, headers=user_a)
+    assert not_yet.status_code == 403 and "open for your team" in not_yet.json["message"]
+    over = client.post(f"/api/v1/tasks/{closed.id}/runs", json={}, headers=user_a)
+    assert over.status_code == 403 and "closed" in over.json["message"]
+    other = client.post(f"/api/v1/tasks/{task.id}/runs", json={}, headers=user_b)
+    assert other.status_code == 403 and other.json["message"] == not_yet.json["message"]
+    constellation.state = ConstellationState.LAUNCHING
+    db.session.commit()
+    unready = client.post(f"/api/v1/tasks/{task.id}/runs", json={}, headers=user_a)
+    assert unready.status_code == 409 and "launching" in unready.json["message"]
+    assert db.session.query(Job).filter_by(kind="run.start").count() == 0
+
+
+def test_a_team_without_a_constellation_is_told_so(
+    app: Flask, people: dict[str, User | None], team_b: Team
+) -> None:
+    with pytest.raises(Conflict, match="no constellation"):
+        runs.start_run(people["user_b"], open_task(team_b.id).id)
+
+
+def test_stopping_marks_the_reason_once_and_only_the_team_may(
+    app: Flask, people: dict[str, User | None], team_a: Team, constellation: Constellation
+) -> None:
+    run = runs.start_run(people["user_a"], open_task(team_a.id).id)
+    run.state = RunState.RUNNING
+    db.session.commit()
+    with pytest.raises(Exception, match="not found"):
+        runs.stop_run(people["user_b"], run.id)
+    runs.stop_run(people["user_a"], run.id)
+    runs.stop_run(people["user_a"], run.id)  # a second click changes nothing
+    assert run.state == RunState.STOPPING and run.stop_reason == "stopped"
+    assert db.session.query(Job).filter_by(kind="run.stop", target_id=run.id).count() == 1
+
+
+def test_the_leaderboard_setting_limits_what_team_users_see(
+    app: Flask,
+    people: dict[str, User | None],
+    team_a: Team,
+    team_b: Team,
+    constellation: Constellation,
+    tmp_path: Path,
+) -> None:
+    finished_run(open_task(team_a.id), constellation.id, tmp_path, score=3)
+    finished_run(open_task(team_b.id), None, tmp_path, score=1)
+    board = runs.leaderboard(people["user_a"])
+    assert [(s.team, s.checkpoints, s.rank) for s in board] == [("Team A", 3, 1), ("Team B", 1, 2)]
+    config = app.config["CLOUDSIM"]
+    for policy, expected in (("own", ["Team A"]), ("none", None)):
+        app.config["CLOUDSIM"] = type(config)(**{**config.__dict__, "leaderboard_for_users": policy})
+        try:
+            if expected is None:
+                with pytest.raises(Forbidden):
+                    runs.leaderboard(people["user_a"])
+                assert len(runs.leaderboard(people["officer"])) == 2
+            else:
+                assert [s.team for s in runs.leaderboard(people["user_a"])] == expected
+        finally:
+            app.config["CLOUDSIM"] = config
+
+
+def test_the_tasks_page_offers_the_open_task_and_hides_later_ones(
+    app: Flask, people: dict[str, User | None], team_a: Team, constellation: Constellation
+) -> None:
+    open_task(team_a.id, name="Open one")
+    open_task(
+        team_a.id,
+        name="Secret later one",
+        window_start=utcnow() + timedelta(hours=1),
+        window_stop=utcnow() + timedelta(hours=2),
+    )
+    client = app.test_client()
+    log_in(client, people["user_a"])  # type: ignore[arg-type]
+    page = client.get("/tasks").get_data(as_text=True)
+    assert "Open one" in page and "Start run" in page and "Secret later one" not in page
+    dashboard = client.get("/").get_data(as_text=True)
+    assert "Open one" in dashboard and "Secret later one" not in dashboard
