@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from datetime import timedelta
 from pathlib import Path
 
@@ -19,7 +20,11 @@ from tests.conftest import log_in, token_for
 @pytest.fixture
 def constellation(app: Flask, team_a: Team) -> Constellation:
     made = Constellation(
-        name="a-vrc", kind="vrc", provider="local", team_id=team_a.id, state=ConstellationState.READY
+        name="a-vrc",
+        kind="vrc",
+        provider="local",
+        team_id=team_a.id,
+        state=ConstellationState.READY,
     )
     db.session.add(made)
     db.session.commit()
@@ -104,7 +109,7 @@ def test_the_leaderboard_setting_limits_what_team_users_see(
     assert [(s.team, s.checkpoints, s.rank) for s in board] == [("Team A", 3, 1), ("Team B", 1, 2)]
     config = app.config["CLOUDSIM"]
     for policy, expected in (("own", ["Team A"]), ("none", None)):
-        app.config["CLOUDSIM"] = type(config)(**{**config.__dict__, "leaderboard_for_users": policy})
+        app.config["CLOUDSIM"] = replace(config, leaderboard_for_users=policy)
         try:
             if expected is None:
                 with pytest.raises(Forbidden):
