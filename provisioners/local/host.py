@@ -68,19 +68,6 @@ first_boot() {
 }
 """
 
-# This private mount namespace began as a copy of the root one, including every other
-# namespace's /run/netns mount: such a copy would keep that namespace (its bridge, its veths)
-# alive after `ip netns delete`, until this host dies. Detach all but the one this host needs.
-_DETACH_OTHER_NETNS = r"""
-detach_other_netns() {
-  local keep=$1 escaped target
-  for escaped in $(awk '$5 ~ "^/run/netns/." {print $5}' /proc/self/mountinfo); do
-    target=$(printf '%b' "$escaped")
-    if [ "$target" != "$keep" ]; then umount --lazy "$target"; fi
-  done
-}
-"""
-
 _MOUNT_OVERLAY = r"""
 root=$host_dir/root
 mount -t overlay "$machine" \
@@ -92,11 +79,9 @@ _MINIMAL_INIT = (
     "set -euo pipefail\n"
     + "DROPPED_CAPABILITIES=-mknod,-dac_read_search,-sys_module,-sys_rawio,-sys_time,-sys_boot\n"
     + _FIRST_BOOT
-    + _DETACH_OTHER_NETNS
     + "host_dir=$1 hostname=$2 machine=$3 machine_id=$4 authorized_keys=$5\n"
     + _MOUNT_OVERLAY
     + r"""
-detach_other_netns ""
 first_boot "$root" "$hostname" "$machine_id" "$authorized_keys"
 mount -t proc proc "$root/proc"
 # Like nspawn: kernel tunables read-only, only this host's network ones (ip_forward) writable.
@@ -141,10 +126,8 @@ _SYSTEMD_BOOT = (
     + _FIRST_BOOT
     + "host_dir=$1 hostname=$2 machine=$3 machine_id=$4 authorized_keys=$5 netns=$6\n"
     + "shift 6\n"
-    + _DETACH_OTHER_NETNS
     + _MOUNT_OVERLAY
     + r"""
-detach_other_netns "/run/netns/$netns"
 first_boot "$root" "$hostname" "$machine_id" "$authorized_keys" "$@"
 propagate=/run/systemd/nspawn/propagate
 mkdir -p "$propagate"

@@ -199,18 +199,6 @@ def test_public_side_reaches_router_but_not_lan_only_host(
     assert b"SSH-2.0-" not in to_sim.stdout
 
 
-def test_hosts_do_not_keep_other_network_namespaces_alive(lan: Lan) -> None:
-    for node in (lan.router, lan.sim):
-        # The launcher lives in the host's outer mount namespace, a copy of the root one.
-        mountinfo = Path(f"/proc/{node.extra['launcher_pid']}/mountinfo").read_text()
-        pinned = {
-            line.split()[4]
-            for line in mountinfo.splitlines()
-            if line.split()[4].startswith("/run/netns/")
-        }
-        assert pinned <= {f"/run/netns/{node.extra['netns']}"}, f"{node.name} pins {pinned}"
-
-
 def test_fresh_driver_rediscovers_running_nodes(
     lan: Lan, make_driver: Callable[[], LocalNodeDriver]
 ) -> None:

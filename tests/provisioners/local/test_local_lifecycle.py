@@ -108,9 +108,15 @@ def test_systemd_hosts_do_not_manage_each_others_services(
         assert twin_b.check("systemctl is-active ssh.service").strip() == "active"
         # Destroying a must leave b's processes alone: b boots a service, a goes away.
         twin_b.check("systemd-run --unit=cloudsim-probe sleep 600")
+        b_mountinfo = Path(f"/proc/{nodes[1].extra['launcher_pid']}/mountinfo")
+        a_netns_mount = f"/run/netns/{nodes[0].extra['netns']} "
+        assert a_netns_mount in b_mountinfo.read_text()
         twin_a.close()
         driver.destroy_node(nodes[0])
         assert twin_b.check("systemctl is-active cloudsim-probe.service").strip() == "active"
+        # b's launcher began with a copy of the mount table naming a's namespace; deleting
+        # that name must take the copy too, or it would keep a's namespace alive.
+        assert a_netns_mount not in b_mountinfo.read_text()
         assert [n.state for n in driver.list_nodes()] == [NodeState.RUNNING]
         assert shells(nodes[1], ssh_key).check("hostname").strip() == "twin-b"
     finally:
