@@ -141,7 +141,8 @@ def test_failed_boot_raises_with_the_boot_log_and_cleans_up(
         state_dir=str(state_dir),
         prefix=host_prefix,
         hidden_paths=["/usr/sbin/sshd"],
-        boot_timeout=3,
+        # Long enough for a loaded machine's systemd to reach (and fail) ssh.service.
+        boot_timeout=8,
     )
     network = broken.ex_create_network("doomed")
     try:
