@@ -41,15 +41,16 @@ class ArgvProxyCommand(paramiko.ProxyCommand):
         assert stdout is not None
         try:
             ready, _, _ = select.select([stdout], [], [], self.timeout)
-            if not ready:
-                raise TimeoutError()
             # unlike paramiko's version, do not spin on a proxy that closed its stdout
-            return os.read(stdout.fileno(), size)
+            data = os.read(stdout.fileno(), size) if ready else None
         except ValueError:
             # close() ran while paramiko's reader thread waited here: that is the end of stream
             return b""
         except OSError as exc:
             raise paramiko.ProxyCommandFailure(" ".join(self.cmd), exc.strerror) from exc
+        if data is None:
+            raise TimeoutError()  # paramiko polls with a timeout; it is not an error
+        return data
 
     def close(self) -> None:
         """Stop the proxy process and reap it."""
