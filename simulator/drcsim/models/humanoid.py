@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from drcsim.urdf import Joint, Link, Robot, Vec3, box, capsule, sphere
 
@@ -31,6 +32,7 @@ X: Vec3 = (1.0, 0.0, 0.0)
 Y: Vec3 = (0.0, 1.0, 0.0)
 Z: Vec3 = (0.0, 0.0, 1.0)
 AXES = {"x": X, "y": Y, "z": Z}
+Row = tuple[Any, ...]
 
 # One row per joint of the left side and the trunk (the right side mirrors y and the
 # asymmetric limits): name, parent, child, origin, axis, lower, upper, velocity, effort, kp, kd.
@@ -60,12 +62,12 @@ _LEFT_LIMBS = [
 _MIRRORED_LIMITS = ("l_leg_hpz", "l_arm_shz", "l_arm_elx")
 
 
-def _spec(row: tuple) -> JointSpec:  # type: ignore[type-arg]
+def _spec(row: Row) -> JointSpec:
     name, parent, child, xyz, axis, lower, upper, velocity, effort, kp, kd = row
     return JointSpec(name, parent, child, xyz, AXES[axis], lower, upper, velocity, effort, kp, kd)
 
 
-def _right(row: tuple) -> tuple:  # type: ignore[type-arg]
+def _right(row: Row) -> Row:
     name, parent, child, xyz, axis, lower, upper, *rest = row
     if name in _MIRRORED_LIMITS:
         lower, upper = -upper, -lower
