@@ -57,7 +57,13 @@ def router(ctx: PlanContext) -> list[PlanItem]:
         return items
     if ctx.router_wheelhouse is None:
         raise ValueError(f"{ctx.machine.name}: the VPN needs csrouter's wheelhouse")
-    return items + vpn_firewall(ctx, ctx.vpn) + ocu_queues(ctx) + csrouter(ctx) + vpn_server(ctx)
+    return (
+        items
+        + vpn_firewall(ctx, ctx.vpn)
+        + ocu_queues(ctx, ctx.vpn)
+        + csrouter(ctx)
+        + vpn_server(ctx)
+    )
 
 
 def vpn_firewall(ctx: PlanContext, vpn: VpnMaterial) -> list[PlanItem]:
@@ -75,9 +81,9 @@ def vpn_firewall(ctx: PlanContext, vpn: VpnMaterial) -> list[PlanItem]:
     ]
 
 
-def ocu_queues(ctx: PlanContext) -> list[PlanItem]:
+def ocu_queues(ctx: PlanContext, vpn: VpnMaterial) -> list[PlanItem]:
     """Send OCU<->LAN packets to csrouter; without a reader the kernel drops them."""
-    rules = queue_rules(ctx.subnet)
+    rules = queue_rules(ctx.subnet, vpn.network)
     return [
         *(iptables_chain(OCU_CHAIN, table=table) for table in sorted({t for t, _, _ in rules})),
         *(
@@ -87,28 +93,32 @@ def ocu_queues(ctx: PlanContext) -> list[PlanItem]:
     ]
 
 
-def queue_rules(lan_subnet: str) -> list[tuple[str, str, list[str]]]:
+def queue_rules(lan_subnet: str, vpn_network: str) -> list[tuple[str, str, list[str]]]:
     """Return csrouter's NFQUEUE rules as (table, chain, rule): the same the daemon restores.
 
-    Uplink is queued before connection tracking (raw), downlink after un-masquerading
-    (mangle FORWARD); router/csrouter/rules.py says why.
+    Packets that may start a flow are queued before connection tracking (raw), replies to
+    the masqueraded OCU after it (mangle FORWARD); router/csrouter/rules.py says why.
     """
     uplink = ["-j", "NFQUEUE", "--queue-num", str(UPLINK_QUEUE)]
     downlink = ["-j", "NFQUEUE", "--queue-num", str(DOWNLINK_QUEUE)]
+    not_local = ["-m", "addrtype", "!", "--dst-type", "LOCAL"]
+    replies = ["-m", "conntrack", "--ctstate", "SNAT"]
     return [
-        ("raw", OCU_CHAIN, ["-i", VPN_DEVICE, "-d", lan_subnet, *uplink]),
+        ("raw", OCU_CHAIN, ["-i", VPN_DEVICE, "-d", lan_subnet, *not_local, *uplink]),
+        ("raw", OCU_CHAIN, ["-s", lan_subnet, "-d", vpn_network, *downlink]),
         ("raw", "PREROUTING", ["-j", OCU_CHAIN]),
-        ("mangle", OCU_CHAIN, ["-s", lan_subnet, "-o", VPN_DEVICE, *downlink]),
+        ("mangle", OCU_CHAIN, ["-s", lan_subnet, "-o", VPN_DEVICE, *replies, *downlink]),
         ("mangle", "FORWARD", ["-j", OCU_CHAIN]),
     ]
 
 
 def csrouter(ctx: PlanContext) -> list[PlanItem]:
     """Install csrouter offline, configure it and keep it running under systemd."""
-    assert ctx.router_wheelhouse is not None
+    assert ctx.router_wheelhouse is not None and ctx.vpn is not None
     render = ctx.templates.render
     config = {
         "lan_subnet": ctx.subnet,
+        "vpn_network": ctx.vpn.network,
         "vpn_device": VPN_DEVICE,
         "uplink_queue": UPLINK_QUEUE,
         "downlink_queue": DOWNLINK_QUEUE,

@@ -25,6 +25,7 @@ class RouterConfig:
     """Where the OCU path is (LAN subnet, VPN device, queues) and where files go."""
 
     lan_subnet: str
+    vpn_network: str = "10.8.0.0/24"
     vpn_device: str = "tun-ocu"
     uplink_queue: int = 0
     downlink_queue: int = 1
@@ -35,10 +36,11 @@ class RouterConfig:
     queue_max_packets: int = 65536
 
     def __post_init__(self) -> None:
-        try:
-            ipaddress.ip_network(self.lan_subnet)
-        except ValueError as exc:
-            raise ConfigError(f"lan_subnet {self.lan_subnet!r} is not a network") from exc
+        for name in ("lan_subnet", "vpn_network"):
+            try:
+                ipaddress.ip_network(getattr(self, name))
+            except ValueError as exc:
+                raise ConfigError(f"{name} {getattr(self, name)!r} is not a network") from exc
         if not _DEVICE.match(self.vpn_device):
             raise ConfigError(f"vpn_device {self.vpn_device!r} is not an interface name")
         queues = (self.uplink_queue, self.downlink_queue)

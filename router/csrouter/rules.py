@@ -4,11 +4,14 @@ They have no --queue-bypass on purpose: while no process listens on a queue the 
 drops its packets, so OCU traffic stops instead of flowing undelayed and uncounted. The
 daemon adds missing rules when it starts and never removes them.
 
-Uplink packets are queued in raw/PREROUTING, before connection tracking: a packet held
-after conntrack saw it leaves an unconfirmed entry, and a second packet of the same flow
-arriving meanwhile (a ping a second, with 250 ms each way) then clashes with it and is
-dropped when released. Downlink packets are queued in mangle/FORWARD, after the router has
-undone its masquerading, so replies to the OCU are matched by their real destination.
+A packet held after connection tracking saw it leaves its flow's conntrack entry
+unconfirmed; a second packet of the same flow arriving meanwhile (a ping every 200 ms with
+250 ms each way) creates a clashing entry and is dropped when released. So every packet
+that may start a flow is queued in raw/PREROUTING, before conntrack: the OCU's packets to
+the LAN (uplink), and LAN packets addressed to a VPN client (downlink of flows the LAN
+starts). Replies to the OCU's own flows reach the router addressed to its LAN address
+(the OCU is masqueraded); they are queued in mangle/FORWARD once the router has undone the
+masquerading (`--ctstate SNAT`), and their flow is long confirmed by then.
 """
 
 from __future__ import annotations
@@ -39,15 +42,19 @@ class Rule:
 
 def queue_rules(config: RouterConfig) -> list[Rule]:
     """Return every rule, each table's own chain before the jump into it."""
-    device, lan = config.vpn_device, config.lan_subnet
+    device, lan, vpn = config.vpn_device, config.lan_subnet, config.vpn_network
     uplink = ("-j", "NFQUEUE", "--queue-num", str(config.uplink_queue))
     downlink = ("-j", "NFQUEUE", "--queue-num", str(config.downlink_queue))
     return [
-        Rule("raw", CHAIN, ("-i", device, "-d", lan, *uplink)),
+        # not the router's own LAN address: the firewall drops what clients send it
+        Rule("raw", CHAIN, ("-i", device, "-d", lan, "-m", "addrtype", "!", "--dst-type",
+                            "LOCAL", *uplink)),
+        Rule("raw", CHAIN, ("-s", lan, "-d", vpn, *downlink)),
         Rule("raw", "PREROUTING", ("-j", CHAIN)),
-        Rule("mangle", CHAIN, ("-s", lan, "-o", device, *downlink)),
+        Rule("mangle", CHAIN, ("-s", lan, "-o", device, "-m", "conntrack", "--ctstate", "SNAT",
+                               *downlink)),
         Rule("mangle", "FORWARD", ("-j", CHAIN)),
-    ]
+    ]  # fmt: skip
 
 
 def _iptables(table: str, *args: str) -> subprocess.CompletedProcess[str]:

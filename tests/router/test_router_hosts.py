@@ -28,6 +28,16 @@ def test_round_trip_is_twice_the_latency(lab: RouterLab) -> None:
     rtts = sorted(float(ms) for ms in re.findall(r"time=([\d.]+) ms", result.stdout))
     # the median: one echo delayed by the loaded, shared test machine is not the router's doing
     assert 2 * LATENCY_MS <= rtts[0] and rtts[len(rtts) // 2] <= 2 * LATENCY_MS + 5, rtts
+    # the other way round too: a flow the LAN starts towards the OCU
+    result = lab.result("sim", f"ping -n -c 10 -i 0.2 -W 3 {ocu_address(lab)}", timeout=30)
+    assert " 0% packet loss" in result.stdout, result.stdout
+    rtts = sorted(float(ms) for ms in re.findall(r"time=([\d.]+) ms", result.stdout))
+    assert 2 * LATENCY_MS <= rtts[0] and rtts[len(rtts) // 2] <= 2 * LATENCY_MS + 5, rtts
+
+
+def ocu_address(lab: RouterLab) -> str:
+    """Return the OCU's address inside the VPN."""
+    return lab.run("ocu", "ip -4 -o addr show dev tun0").split()[3].split("/")[0]
 
 
 def test_uplink_udp_payload_is_counted_exactly(lab: RouterLab) -> None:
@@ -58,7 +68,7 @@ def test_past_the_uplink_cap_the_sim_gets_exactly_what_fitted(lab: RouterLab) ->
 def test_past_the_downlink_cap_the_ocu_gets_exactly_what_fitted(lab: RouterLab) -> None:
     cap_bits = 8 * 700 * 250
     lab.csrouter("arm", "--latency-ms", "0", "--downlink-bits", str(cap_bits), "--run-id", "down")
-    ocu_vpn = lab.run("ocu", "ip -4 -o addr show dev tun0").split()[3].split("/")[0]
+    ocu_vpn = ocu_address(lab)
     out = lab.start_receiver("ocu", PORT, timeout=20, idle=1.5)
     lab.send_udp("sim", ocu_vpn, PORT, count=400, size=700, pps=2000)
     assert lab.received("ocu", out) == {"datagrams": 250, "bytes": 175_000}

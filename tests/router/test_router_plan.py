@@ -40,8 +40,8 @@ def material() -> VpnMaterial:
 
 
 def test_the_plan_installs_the_rules_the_daemon_checks() -> None:
-    daemon = daemon_queue_rules(RouterConfig(lan_subnet=SUBNET))
-    assert [(r.table, r.chain, list(r.args)) for r in daemon] == queue_rules(SUBNET)
+    daemon = daemon_queue_rules(RouterConfig(lan_subnet=SUBNET, vpn_network="10.9.0.0/24"))
+    assert [(r.table, r.chain, list(r.args)) for r in daemon] == queue_rules(SUBNET, "10.9.0.0/24")
 
 
 def test_without_vpn_material_the_router_only_forwards() -> None:
