@@ -62,6 +62,7 @@ class Machines:
     sim: Target
     router: Target | None
     sim_ip: str
+    by_name: dict[str, Target]
 
     def by_role(self) -> dict[str, Target]:
         found = {"sim": self.sim}
@@ -96,6 +97,7 @@ def machines(run: Run, config: Config, ctx: JobContext | None = None) -> Iterato
             sim=reach[sim.name],
             router=reach[router.name] if router is not None else None,
             sim_ip=sim.private_ip,
+            by_name=reach,
         )
 
 
@@ -164,7 +166,7 @@ def start_run_job(ctx: JobContext) -> None:
     except (CloudSimError, SSHError, ValueError) as exc:
         db.session.rollback()
         run = _run(ctx)
-        run.error = f"{ctx.job.stage}: {exc}"
+        run.error = f"starting failed at the {ctx.job.stage} stage: {exc}"
         run.stop_reason = run.stop_reason or "error"
         run.state = RunState.STOPPING
         db.session.commit()

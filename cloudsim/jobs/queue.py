@@ -53,6 +53,7 @@ def celery_init_app(app: Flask, config: Config) -> Celery:
     celery.set_default()
     app.extensions["celery"] = celery
     # Importing the task modules registers them with the app's Celery.
+    from cloudsim.competition import demo  # noqa: F401
     from cloudsim.competition import engine as competition_engine  # noqa: F401
     from cloudsim.fleet import engine, reconcile  # noqa: F401
     from cloudsim.jobs import diagnostics, runner, service  # noqa: F401

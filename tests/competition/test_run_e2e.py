@@ -1,0 +1,225 @@
+"""End to end on a local vrc constellation: schedule, start in Chromium, drive from fc1, end by
+timeout, logs with matching checksums, score and leaderboard; refusals; a worker killed mid-run.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import shlex
+import threading
+from collections.abc import Iterator
+from datetime import timedelta
+from pathlib import Path
+
+import pytest
+from celery.contrib.testing.worker import start_worker
+from flask import Flask
+from playwright.sync_api import Browser, Page, expect, sync_playwright
+from werkzeug.serving import make_server
+
+from cloudsim.competition.artifacts import (
+    RUN_LOGS,
+    LogStore,
+    collect_logs,
+    remote_sha256,
+    run_dir,
+)
+from cloudsim.competition.engine import machines, supervise_runs
+from cloudsim.competition.plots import read_bandwidth_log
+from cloudsim.competition.schedule import in_zone
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.fleet import service as fleet
+from cloudsim.models import JobState, Role, Run, RunState, Team, User, utcnow
+from cloudsim.people import service as people_service
+from tests.conftest import PASSWORD, make_user, token_for
+from tests.fleet.conftest import finished
+from tests.support.servers import wait_for
+from tests.support.workers import kill_worker, worker_process
+from tests.web.test_browser import CHROMIUM, CHROMIUM_ARGS
+
+pytestmark = [pytest.mark.hosts, pytest.mark.browser]
+ZONE = "Europe/Berlin"
+RUN_SECONDS = 25  # simulated: the example controller passes a gate or two, not all four (~34 s)
+
+
+@pytest.fixture
+def live_url(fleet_app: Flask) -> Iterator[str]:
+    server = make_server("127.0.0.1", 0, fleet_app, threaded=True)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{server.server_port}"
+    server.shutdown()
+    thread.join()
+
+
+@pytest.fixture
+def browser() -> Iterator[Browser]:
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield browser
+        browser.close()
+
+
+def _log_in(page: Page, base: str, user: User) -> None:
+    page.goto(f"{base}/login")
+    page.get_by_label("E-mail").fill(user.email)
+    page.get_by_label("Password").fill(PASSWORD)
+    page.get_by_role("button", name="Log in").click()
+
+
+def _local(minutes: int) -> str:
+    return in_zone(utcnow() + timedelta(minutes=minutes), ZONE).strftime("%Y-%m-%dT%H:%M")
+
+
+# simple: no router to arm and no field computer (team code runs on the practice server)
+@pytest.mark.parametrize(("kind", "team_machine"), [("vrc", "fc1"), ("simple", "sim")])
+def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
+    fleet_app: Flask,
+    fleet_config: Config,
+    live_url: str,
+    browser: Browser,
+    tmp_path: Path,
+    kind: str,
+    team_machine: str,
+) -> None:
+    team_a = people_service.create_team(None, "Team A")
+    team_b = people_service.create_team(None, "Team B")
+    officer = make_user(Role.OFFICER)
+    user_a, user_b = make_user(Role.USER, team_a), make_user(Role.USER, team_b)
+    celery = fleet_app.extensions["celery"]
+    with start_worker(celery, pool="threads", concurrency=2, perform_ping_check=False):
+        constellation, job = fleet.launch(None, name="e2e", kind=kind, provider="local")
+        constellation.team_id = team_a.id
+        db.session.commit()
+        done = finished(job.id)
+        assert done.state == JobState.SUCCEEDED, f"{done.error}\n{done.log[:6000]}"
+
+    page = browser.new_context().new_page()
+    _log_in(page, live_url, officer)
+    page.goto(f"{live_url}/tasks")
+    page.get_by_label("Name").fill("Walking, short")
+    page.get_by_label("Team", exact=True).select_option(label="Team A")
+    page.get_by_label("World").select_option("vrc_task_2")
+    page.get_by_label("Time zone").fill(ZONE)
+    page.get_by_label("Window opens").fill(_local(-1))
+    page.get_by_label("Window closes").fill(_local(30))
+    page.get_by_label("Timeout (s)").fill(str(RUN_SECONDS))
+    page.get_by_label("Uplink cap (bits)").fill("115200")
+    page.get_by_role("button", name="Schedule").click()
+    expect(page.get_by_text("Scheduled Walking, short for 1 team(s).")).to_be_visible()
+
+    # the simulator keeps running when the worker that started it dies
+    process = worker_process(fleet_config)
+    try:
+        page = browser.new_context().new_page()
+        _log_in(page, live_url, user_a)
+        page.goto(f"{live_url}/tasks")
+        page.get_by_role("button", name="Start run").click()
+        expect(page.locator("#run-state")).not_to_have_text("starting", timeout=120_000)
+    finally:
+        kill_worker(process)
+    run = db.session.scalars(db.select(Run)).one()
+    assert run.state == RunState.RUNNING, run.error
+    expect(page.locator("#run-state")).to_have_text("running")
+    _refusals(fleet_app, team_a, user_a, user_b, run)
+
+    db.session.refresh(run)
+    with machines(run, fleet_config) as reach:
+        controller = (
+            "systemd-run --unit=example-controller --collect /opt/drcsim/bin/drcsim "
+            f"example-controller --server {shlex.quote(reach.sim_ip)} --world vrc_task_2 "
+            "--timeout 120"
+        )
+        reach.executor.run(reach.by_name[team_machine], controller, timeout=30)
+
+    with start_worker(celery, pool="threads", concurrency=2, perform_ping_check=False):
+
+        def ended() -> bool:
+            supervise_runs()
+            db.session.expire_all()
+            return db.session.get(Run, run.id).state in (RunState.FINISHED, RunState.ERROR)  # type: ignore[union-attr]
+
+        wait_for(ended, 180, "the run to end by its time limit")
+    db.session.refresh(run)
+    assert run.state == RunState.FINISHED, run.error
+    assert run.end_reason == "time_limit" and run.score >= 1, (run.end_reason, run.score)
+    assert run.sim_seconds == pytest.approx(RUN_SECONDS, abs=0.01)
+    assert run.uplink_bits_used >= 0 and run.active_constellation_id is None
+
+    stored = {a.filename: a for a in run.artifacts}
+    expected = [log for log in RUN_LOGS if kind == "vrc" or log.machine == "sim"]
+    assert {log.filename for log in expected} == set(stored)
+    client = fleet_app.test_client()
+    headers = token_for(user_a)
+    with machines(run, fleet_config) as reach:
+        for artifact in stored.values():
+            target = reach.router if artifact.filename == "bandwidth.jsonl" else reach.sim
+            assert target is not None
+            on_machine = remote_sha256(
+                reach.executor, target, f"{run_dir(run.id)}/{artifact.filename}"
+            )
+            body = client.get(f"/api/v1/runs/{run.id}/logs/{artifact.id}", headers=headers)
+            assert body.status_code == 200
+            assert hashlib.sha256(body.data).hexdigest() == artifact.sha256 == on_machine
+    # collecting again copies nothing: every log is stored with the same checksum
+    lines: list[str] = []
+    with machines(run, fleet_config) as reach:
+        again = collect_logs(
+            run, reach.executor, reach.by_role(), LogStore(fleet_config), tmp_path, lines.append
+        )
+    assert again == [] and len(lines) == len(expected)
+    assert all("stored already" in line for line in lines), lines
+    other = client.get(f"/api/v1/runs/{run.id}/logs/{artifact.id}", headers=token_for(user_b))
+    assert other.status_code == 404
+    checkpoints = [e for e in run.score_events if e.kind == "checkpoint"]
+    assert len(checkpoints) == run.score
+
+    board = client.get("/api/v1/leaderboard", headers=headers).json
+    assert board[0]["team"] == "Team A" and board[0]["checkpoints"] == run.score
+    page.goto(f"{live_url}/runs/{run.id}")
+    expect(page.locator("#run-state")).to_have_text("finished")
+    if kind == "vrc":  # the router was armed with the task's caps and logged the run
+        expect(page.locator("svg[aria-label='Uplink bits used'] .limit")).to_have_count(1)
+        store = LogStore(fleet_config)
+        usage = read_bandwidth_log(store.lines(stored["bandwidth.jsonl"].location))
+        assert usage["uplink"].cap_bits == 115200
+    expect(page.get_by_role("link", name="score.jsonl")).to_be_visible()
+    page.goto(f"{live_url}/leaderboard")
+    expect(page.locator("tr[data-team='Team A'] .checkpoints")).to_have_text(str(run.score))
+
+
+def _refusals(app: Flask, team_a: Team, user_a: User, user_b: User, run: Run) -> None:
+    """Starts the server refuses while the run is live: another team, no window, busy."""
+    client = app.test_client()
+    by_b = client.post(f"/api/v1/tasks/{run.task_id}/runs", json={}, headers=token_for(user_b))
+    assert by_b.status_code == 403, by_b.json
+    officer = make_user(Role.OFFICER)
+    later = client.post(
+        "/api/v1/tasks",
+        json={
+            "name": "Later",
+            "world": "vrc_task_1",
+            "start": _local(60).replace("T", " "),
+            "stop": _local(90).replace("T", " "),
+            "time_zone": ZONE,
+            "team_ids": [team_a.id],
+        },
+        headers=token_for(officer),
+    ).json[0]
+    too_early = client.post(f"/api/v1/tasks/{later['id']}/runs", json={}, headers=token_for(user_a))
+    assert too_early.status_code == 403, too_early.json
+    now = client.post(
+        "/api/v1/tasks",
+        json={
+            "name": "Now too",
+            "world": "vrc_task_1",
+            "start": _local(-1).replace("T", " "),
+            "stop": _local(30).replace("T", " "),
+            "time_zone": ZONE,
+            "team_ids": [team_a.id],
+        },
+        headers=token_for(officer),
+    ).json[0]
+    busy = client.post(f"/api/v1/tasks/{now['id']}/runs", json={}, headers=token_for(user_a))
+    assert busy.status_code == 409 and "busy" in busy.json["message"], busy.json
