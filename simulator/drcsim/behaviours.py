@@ -137,6 +137,11 @@ class Behaviours:
         self.pose_cmd = [pos[0], pos[1], self.client.getEulerFromQuaternion(orn)[2]]
         self.reaches: dict[str, Reach] = {}
         self.steps = 0
+        body = LEG_JOINTS + TRUNK_JOINTS
+        self._body_slots = np.array([controller.slot[name] for name in body])
+        self._stand_targets = np.array([humanoid.STAND_POSTURE.get(n, 0.0) for n in body])
+        gait = [f"{side}_leg_{joint}" for side in "lr" for joint in ("hpy", "kny", "aky")]
+        self._gait_index = np.array([body.index(name) for name in gait])
         controller.reset_to(humanoid.STAND_POSTURE)
 
     # -- commands -------------------------------------------------------------------------
@@ -245,16 +250,14 @@ class Behaviours:
             self.drive.apply()
 
     def _legs(self) -> None:
-        posture = dict(humanoid.STAND_POSTURE)
+        targets = self._stand_targets
         if self.mode == "walk":
-            for side, shift in (("l", 0.0), ("r", math.pi)):
+            targets = targets.copy()
+            for offset, shift in ((0, 0.0), (3, math.pi)):
                 swing = math.sin(self.phase + shift)
-                posture[f"{side}_leg_hpy"] = -0.3 - 0.3 * swing
-                posture[f"{side}_leg_kny"] = 0.6 + 0.6 * max(0.0, swing)
-                posture[f"{side}_leg_aky"] = -(
-                    posture[f"{side}_leg_hpy"] + posture[f"{side}_leg_kny"]
-                )
-        self.controller.set_positions({n: posture.get(n, 0.0) for n in LEG_JOINTS + TRUNK_JOINTS})
+                hip, knee = -0.3 - 0.3 * swing, 0.6 + 0.6 * max(0.0, swing)
+                targets[self._gait_index[offset : offset + 3]] = (hip, knee, -(hip + knee))
+        self.controller.set_slot_positions(self._body_slots, targets)
 
     def _walk_step(self) -> None:
         assert self.walk_goal is not None

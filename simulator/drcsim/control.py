@@ -57,6 +57,11 @@ class JointController:
         self.mode[slot] = POSITION
         self.target[slot] = min(max(value, self.lower[slot]), self.upper[slot])
 
+    def set_slot_positions(self, slots: np.ndarray, values: np.ndarray) -> None:
+        """Switch the joints at `slots` to position control towards `values` (clamped)."""
+        self.mode[slots] = POSITION
+        self.target[slots] = np.clip(values, self.lower[slots], self.upper[slots])
+
     def set_positions(self, targets: dict[str, float]) -> None:
         """Switch several joints to position control."""
         for name, value in targets.items():

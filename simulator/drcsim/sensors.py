@@ -163,10 +163,16 @@ class Sensors:
             s.camera_fov_deg, s.camera_width / s.camera_height, 0.05, 50.0
         )
         _, _, rgba, _, _ = client.getCameraImage(
-            s.camera_width, s.camera_height, view, projection, renderer=pybullet.ER_TINY_RENDERER
+            s.camera_width,
+            s.camera_height,
+            view,
+            projection,
+            renderer=pybullet.ER_TINY_RENDERER,
+            flags=pybullet.ER_NO_SEGMENTATION_MASK,  # not published: skip computing it
         )
         image = np.reshape(np.asarray(rgba, dtype=np.uint8), (s.camera_height, s.camera_width, 4))
-        noisy = image[:, :, :3] + rng.normal(0.0, s.camera_noise, (*image.shape[:2], 3))
+        noise = rng.standard_normal((*image.shape[:2], 3), dtype=np.float32) * s.camera_noise
+        noisy = image[:, :, :3] + noise
         return bytes(np.clip(noisy, 0, 255).astype(np.uint8).tobytes())
 
     def _camera(self, rng: np.random.Generator, _: float) -> dict[str, Any]:
