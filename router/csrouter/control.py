@@ -38,6 +38,7 @@ class ControlServer:
             self._socket.bind(str(self.path))
         finally:
             os.umask(previous)
+        os.chmod(self.path, 0o600)
         self._socket.listen(8)
         self._thread = threading.Thread(target=self._serve, name="control", daemon=True)
 

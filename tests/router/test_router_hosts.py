@@ -21,6 +21,17 @@ def test_applying_the_router_plan_again_changes_nothing(lab: RouterLab) -> None:
     assert lab.run("router", "stat -c %a /etc/openvpn/server/cloudsim/server.key").strip() == "600"
 
 
+def test_only_root_controls_csrouter_and_arguments_are_checked(lab: RouterLab) -> None:
+    assert lab.run("router", "stat -c %a /run/csrouter /run/csrouter/control.sock").split() == [
+        "700",
+        "600",
+    ]
+    as_nobody = lab.result("router", "setpriv --reuid=nobody --clear-groups csrouter status")
+    assert as_nobody.exit_code == 3, as_nobody
+    too_long = lab.result("router", "csrouter arm --latency-ms 2001")
+    assert too_long.exit_code == 2 and "0-2000" in too_long.stderr
+
+
 def test_round_trip_is_twice_the_latency(lab: RouterLab) -> None:
     lab.csrouter("arm", "--latency-ms", str(LATENCY_MS), "--run-id", "rtt")
     result = lab.result("ocu", f"ping -n -c 10 -i 0.2 -W 3 {lab.ip('sim')}", timeout=30)

@@ -1,0 +1,67 @@
+"""The daemon's configuration, saved state and bandwidth log files (no hosts, no queues)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from csrouter.bandwidth_log import BandwidthLog
+from csrouter.config import RouterConfig, check_cap, check_latency, load_config
+from csrouter.errors import ConfigError
+from csrouter.packets import PacketSize
+from csrouter.run import Run, SavedState
+
+
+def test_the_configuration_is_checked(tmp_path: Path) -> None:
+    path = tmp_path / "router.json"
+    path.write_text(json.dumps({"lan_subnet": "10.0.0.0/24", "vpn_network": "10.8.0.0/24"}))
+    assert load_config(path).vpn_device == "tun-ocu"
+    for bad, message in (
+        ({"lan_subnet": "10.0.0.300/24"}, "not a network"),
+        ({"lan_subnet": "10.0.0.0/24", "uplink_queue": 1}, "distinct"),
+        ({"lan_subnet": "10.0.0.0/24", "vpn_device": "tun0; rm -rf /"}, "interface name"),
+        ({"lan_subnet": "10.0.0.0/24", "colour": "red"}, "unknown"),
+        ({}, "needs lan_subnet"),
+    ):
+        path.write_text(json.dumps(bad))
+        with pytest.raises(ConfigError, match=message):
+            load_config(path)
+
+
+def test_latency_and_caps_are_bounded() -> None:
+    assert check_latency(0) == 0 and check_latency(2000) == 2000
+    for bad in (-1, 2001, 2.5, True):
+        with pytest.raises(ConfigError):
+            check_latency(bad)  # type: ignore[arg-type]
+    assert check_cap("uplink_bits", None) is None and check_cap("uplink_bits", 0) == 0
+    with pytest.raises(ConfigError, match="uplink_bits"):
+        check_cap("uplink_bits", -8)
+
+
+def test_a_saved_run_resumes_with_its_counts_and_spent_state(tmp_path: Path) -> None:
+    run = Run.arm(latency_ms=250, uplink_bits=8000, downlink_bits=None, run_id="r", now=100.0)
+    run.meters["uplink"].admit(PacketSize(1028, 1000))
+    run.meters["uplink"].admit(PacketSize(28, 1))  # does not fit: spent
+    SavedState(run, False, 101.0, ["earlier fault"]).write(str(tmp_path / "state.json"))
+    saved = SavedState.read(str(tmp_path / "state.json"))
+    assert saved is not None and not saved.clean_exit and saved.faults == ["earlier fault"]
+    assert saved.run.counters(102.0) == run.counters(102.0)
+    assert saved.run.meters["uplink"].spent and saved.run.counters(102.0)["elapsed_s"] == 2.0
+    assert SavedState.read(str(tmp_path / "missing.json")) is None
+
+
+def test_the_bandwidth_log_restarts_and_keeps_the_previous_run(tmp_path: Path) -> None:
+    log = BandwidthLog(str(tmp_path / "logs" / "bandwidth.log"))
+    log.append([{"run": 1}])
+    log.restart()
+    log.append([{"run": 2}, {"run": 2, "second": 1}])
+    log.close()
+    assert (tmp_path / "logs" / "bandwidth.log.1").read_text() == '{"run":1}\n'
+    lines = (tmp_path / "logs" / "bandwidth.log").read_text().splitlines()
+    assert [json.loads(line)["run"] for line in lines] == [2, 2]
+
+
+def test_router_config_defaults_match_the_plan() -> None:
+    config = RouterConfig(lan_subnet="10.0.0.0/24")
+    assert (config.uplink_queue, config.downlink_queue, config.default_latency_ms) == (0, 1, 250)
