@@ -213,7 +213,7 @@ class Behaviours:
         client, robot = self.client, self.scene.robot
         pos, orn = client.getBasePositionAndOrientation(robot)
         yaw = client.getEulerFromQuaternion(orn)[2]
-        if recover or self.mode == "none":
+        if recover:
             # Recovery assist: the robot is stood up where it is (same rule for every team).
             z = humanoid.STAND_PELVIS_HEIGHT + self.scene.ground_height(pos[0], pos[1])
             client.resetBasePositionAndOrientation(
