@@ -36,13 +36,14 @@ from cloudsim.fleet.connect import MachineHostKeys, targets
 from cloudsim.fleet.keys import constellation_keypair
 from cloudsim.fleet.providers import open_provider
 from cloudsim.jobs.runner import JobContext, job_kind
-from cloudsim.models import Run, RunState, ScoreEvent, utcnow
+from cloudsim.models import Job, JobState, Run, RunState, ScoreEvent, utcnow
 from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
 from provisioners.ssh import Machine as Target
 
 log = logging.getLogger(__name__)
 DRCSIM = "/opt/drcsim/bin/drcsim"
 STOP_TIMEOUT_S = 60
+MAX_STOP_ATTEMPTS = 3
 
 
 class RunError(CloudSimError):
@@ -319,7 +320,25 @@ def supervise_runs() -> int:
                 continue
         if reason is not None:
             stopped += request_stop(run, reason)
-    return stopped
+    return stopped + _retry_failed_stops()
+
+
+def _retry_failed_stops() -> int:
+    """Start the stop job again for runs left `stopping` by a stop job that failed."""
+    retried = 0
+    for run in db.session.scalars(select(Run).where(Run.state == RunState.STOPPING)):
+        jobs = list(
+            db.session.scalars(
+                select(Job)
+                .where(Job.kind == "run.stop", Job.target_type == "run", Job.target_id == run.id)
+                .order_by(Job.created_at.desc())
+            )
+        )
+        if jobs and jobs[0].state == JobState.FAILED and len(jobs) < MAX_STOP_ATTEMPTS:
+            log.warning("run %s: stop job failed (%s); starting it again", run.id, jobs[0].error)
+            _enqueue_stop(run)
+            retried += 1
+    return retried
 
 
 def follow(run: Run, config: Config) -> str | None:

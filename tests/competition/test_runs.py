@@ -137,3 +137,23 @@ def test_the_tasks_page_offers_the_open_task_and_hides_later_ones(
     assert "Open one" in page and "Start run" in page and "Secret later one" not in page
     dashboard = client.get("/").get_data(as_text=True)
     assert "Open one" in dashboard and "Secret later one" not in dashboard
+
+
+def test_the_beat_restarts_a_failed_stop_job_a_few_times_then_leaves_it(
+    app: Flask, people: dict[str, User | None], team_a: Team, constellation: Constellation
+) -> None:
+    from cloudsim.competition.engine import MAX_STOP_ATTEMPTS, supervise_runs
+    from cloudsim.models import JobState
+
+    run = runs.start_run(people["user_a"], open_task(team_a.id).id)
+    run.state = RunState.RUNNING
+    db.session.commit()
+    runs.stop_run(people["user_a"], run.id)
+    for attempt in range(1, MAX_STOP_ATTEMPTS + 1):
+        stops = db.session.query(Job).filter_by(kind="run.stop", target_id=run.id).all()
+        assert len(stops) == attempt
+        assert supervise_runs() == 0  # the latest stop job has not failed
+        for job in stops:
+            job.state = JobState.FAILED
+        db.session.commit()
+        assert supervise_runs() == (1 if attempt < MAX_STOP_ATTEMPTS else 0)
