@@ -8,8 +8,9 @@ what CloudSim put there (keys, services, CLOUDSIM-* chains, its files), puts bac
 server's /etc/hosts, /etc/motd, default route, firewall and ip_forward, its own hostname, and
 frees it. A server that cannot be cleaned up is freed anyway (terminate must finish) with a
 warning in the state, and is cleaned before its next claim. Claims live in a JSON file under
-state_dir, so any later driver rediscovers them. See README.md; modules: driver (the
-libcloud API), inventory, claims (choosing servers), remote (the SSH work), state.
+state_dir, so any later driver rediscovers them. See README.md. Modules: driver (the
+libcloud API), inventory, claims (choosing servers), remote (the SSH work), state,
+nodes (libcloud objects from claims), hostkeys.
 """
 
 from typing import cast

@@ -6,12 +6,10 @@ Creating a node claims a free server and prepares it over SSH with the inventory
 
 from __future__ import annotations
 
-import datetime
 import ipaddress
 import logging
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +31,6 @@ from provisioners.servers.claims import (
     check_tags,
     choose_server,
     free_lan,
-    node_state,
 )
 from provisioners.servers.errors import (
     InvalidRequestError,
@@ -42,7 +39,9 @@ from provisioners.servers.errors import (
     ServerSetupError,
     ServersProviderError,
 )
+from provisioners.servers.hostkeys import StateHostKeys
 from provisioners.servers.inventory import Inventory, Server
+from provisioners.servers.nodes import ServersNetwork, server_status, to_network, to_node
 from provisioners.servers.state import (
     STATUS_FAILED,
     STATUS_PREPARING,
@@ -59,35 +58,6 @@ EXISTING = "existing"
 LOCATION_ID = "servers"
 DEFAULT_CONNECT_TIMEOUT_SECONDS = 60.0
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class ServersNetwork:
-    """A pre-made LAN in use under a network name, as handed to create_node(ex_network=...)."""
-
-    id: str
-    name: str
-    cidr: str
-    driver: Any = field(repr=False, compare=False)
-    extra: dict[str, Any] = field(default_factory=dict)
-
-
-class _StateHostKeys:
-    """Host keys of servers: pinned in the inventory, else recorded at first contact."""
-
-    def __init__(self, state: StateFile, inventory: Inventory) -> None:
-        self._state = state
-        self._inventory = inventory
-
-    def get(self, machine_name: str) -> str | None:
-        server = self._inventory.server(machine_name)
-        if server is not None and server.host_key is not None:
-            return server.host_key
-        return self._state.read().host_keys.get(machine_name)
-
-    def put(self, machine_name: str, key_type_and_base64: str) -> None:
-        with self._state.transaction() as state:
-            state.host_keys.setdefault(machine_name, key_type_and_base64)
 
 
 class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
@@ -112,7 +82,7 @@ class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
         self.inventory = Inventory.of(inventory)
         self.connect_timeout = connect_timeout
         self._state = StateFile(Path(state_dir))
-        self._host_keys = _StateHostKeys(self._state, self.inventory)
+        self._host_keys = StateHostKeys(self._state, self.inventory)
 
     # -- networks ------------------------------------------------------------------------------
 
@@ -131,23 +101,23 @@ class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
                     raise InvalidRequestError(
                         f"network {name!r} exists on {existing.cidr}, not {cidr}"
                     )
-                return self._to_network(existing)
+                return to_network(self, existing)
             lan, lan_cidr = free_lan(self.inventory, state, name, cidr)
             claim = NetworkClaim(name=name, lan=lan, cidr=lan_cidr, created_at=time.time())
             state.networks[name] = claim
-            return self._to_network(claim)
+            return to_network(self, claim)
 
     def ex_list_networks(self) -> list[ServersNetwork]:
         """Return the networks in use."""
         networks = self._state.read().networks.values()
-        return [self._to_network(claim) for claim in sorted(networks, key=lambda n: n.name)]
+        return [to_network(self, claim) for claim in sorted(networks, key=lambda n: n.name)]
 
     def ex_get_network(self, name: str) -> ServersNetwork:
         """Return the named network in use, or raise NetworkNotFoundError."""
         claim = self._state.read().networks.get(name)
         if claim is None:
             raise NetworkNotFoundError(f"no network {name!r} is in use")
-        return self._to_network(claim)
+        return to_network(self, claim)
 
     def ex_destroy_network(self, network: ServersNetwork | str) -> bool:
         """Free a network no node uses any more; True also when it was not in use."""
@@ -204,7 +174,7 @@ class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
                     and claim.creator.alive()
                     and claim.creator != me
                 ):
-                    return self._to_node(claim)
+                    return to_node(self, claim)
                 # Preparation failed or its process died: prepare again, from this process.
                 if claim.public_key != public_key:
                     stale_keys.append(claim.public_key)
@@ -252,7 +222,7 @@ class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
                 raise ServersProviderError(f"node {name!r} was destroyed while being prepared")
             current.status = STATUS_READY
             state.pending_cleanups.pop(server.name, None)
-            return self._to_node(current)
+            return to_node(self, current)
 
     def destroy_node(self, node: Node) -> bool:
         """Clean the node's server up and free it; True also when it is not claimed.
@@ -320,7 +290,7 @@ class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
     def list_nodes(self) -> list[Node]:
         """Return a node per claimed server, rediscovered from state_dir."""
         claims = self._state.read().claims.values()
-        return [self._to_node(claim) for claim in sorted(claims, key=lambda c: c.node)]
+        return [to_node(self, claim) for claim in sorted(claims, key=lambda c: c.node)]
 
     def ex_list_nodes_by_tags(self, tags: Mapping[str, str]) -> list[Node]:
         """Return the nodes carrying every one of tags (all nodes for no tags)."""
@@ -333,28 +303,7 @@ class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
     def ex_list_servers(self) -> list[dict[str, Any]]:
         """Return every inventory server with its status (free or claimed), never its key."""
         state = self._state.read()
-        servers = []
-        for server in self.inventory.servers:
-            claim = state.claims.get(server.name)
-            pending = state.pending_cleanups.get(server.name)
-            servers.append(
-                {
-                    "name": server.name,
-                    "address": server.address,
-                    "private_ip": server.private_ip,
-                    "public_ip": server.public_ip,
-                    "network": server.network,
-                    "cidr": server.cidr,
-                    "user": server.user,
-                    "capabilities": sorted(server.capabilities),
-                    "status": "free" if claim is None else "claimed",
-                    "node": claim.node if claim else None,
-                    "node_state": node_state(claim).value if claim else None,
-                    "tags": dict(claim.tags) if claim else {},
-                    "warning": pending.warning if pending else None,
-                }
-            )
-        return servers
+        return [server_status(server, state) for server in self.inventory.servers]
 
     def wait_until_running(
         self,
@@ -421,44 +370,6 @@ class ServersNodeDriver(NodeDriver):  # type: ignore[misc]
             claim = state.claims.get(server_name)
             if claim is not None and claim.node == node_name:
                 claim.status, claim.error = STATUS_FAILED, error
-
-    def _to_network(self, claim: NetworkClaim) -> ServersNetwork:
-        return ServersNetwork(
-            id=claim.name,
-            name=claim.name,
-            cidr=claim.cidr,
-            driver=self,
-            extra={"lan": claim.lan, "created_at": claim.created_at},
-        )
-
-    def _to_node(self, claim: ServerClaim) -> Node:
-        server = self.inventory.server(claim.server)
-        extra: dict[str, Any] = {
-            "server": claim.server,
-            "network": claim.network,
-            "tags": dict(claim.tags),
-            "status": claim.status,
-            "error": claim.error,
-            # How the provider itself logs in; the engine reaches nodes by their addresses.
-            "ssh_user": server.user if server else None,
-            "ssh_address": server.address if server else None,
-            "ssh_port": server.port if server else None,
-            "capabilities": sorted(server.capabilities) if server else [],
-        }
-        if server is not None and server.proxy_command:
-            extra["ssh_proxy_command"] = list(server.proxy_command)
-        return Node(
-            id=claim.server,
-            name=claim.node,
-            state=node_state(claim),
-            public_ips=[claim.public_ip] if claim.public_ip else [],
-            private_ips=[claim.private_ip],
-            driver=self,
-            size=self.list_sizes()[0],
-            image=self.list_images()[0],
-            created_at=datetime.datetime.fromtimestamp(claim.created_at, tz=datetime.UTC),
-            extra=extra,
-        )
 
 
 def _log_line(machine_name: str, line: str) -> None:
