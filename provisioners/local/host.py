@@ -21,6 +21,7 @@ INIT_MINIMAL = "minimal"
 INIT_MODES = (INIT_SYSTEMD, INIT_MINIMAL)
 
 SYSTEMD_BINARY = Path("/usr/lib/systemd/systemd")
+NSPAWN_PROPAGATE_DIR = Path("/run/systemd/nspawn/propagate")
 SSH_PORT = 22
 # Units the base image enables that a host still needs: its sshd.
 KEEP_ENABLED_UNITS = frozenset({"ssh.service", "sshd.service", "ssh.socket"})
@@ -385,11 +386,11 @@ def systemd_journal_tail(init: ProcessId | None, lines: int = 30) -> str:
 
 def remove_host_files(spec: HostSpec) -> None:
     """Remove the host's overlay directories and nspawn's leftover propagation directory."""
-    if spec.host_dir.exists():
-        shutil.rmtree(spec.host_dir)
-    propagate_dir = Path("/run/systemd/nspawn/propagate") / spec.machine
-    if propagate_dir.exists():
-        shutil.rmtree(propagate_dir)
+    for directory in (spec.host_dir, NSPAWN_PROPAGATE_DIR / spec.machine):
+        try:
+            shutil.rmtree(directory)
+        except FileNotFoundError:
+            continue  # never made, or removed by a concurrent destroy of the same host
 
 
 def mount_hosts_tmpfs(hosts_dir: Path, source: str) -> None:

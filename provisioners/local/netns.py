@@ -4,6 +4,7 @@ import os
 from pathlib import Path
 
 from provisioners.local.commands import command_succeeds, run_command
+from provisioners.local.errors import CommandError
 
 NETNS_DIR = Path("/run/netns")
 BRIDGE_NAME = "br0"
@@ -41,8 +42,14 @@ def create_namespace(name: str) -> None:
 
 def delete_namespace(name: str) -> None:
     """Delete network namespace `name` (its interfaces go with it); no-op when absent."""
-    if namespace_exists(name):
+    if not namespace_exists(name):
+        return
+    try:
         run_command(["ip", "netns", "delete", name])
+    except CommandError:
+        # Another destroy of the same thing may have deleted it a moment ago: that is success.
+        if namespace_exists(name):
+            raise
 
 
 def create_bridge(namespace: str, address_cidr: str | None = None) -> None:
@@ -86,7 +93,12 @@ def namespace_pids(name: str) -> list[int]:
     """Return the PIDs of every process living in network namespace `name`."""
     if not namespace_exists(name):
         return []
-    output = run_command(["ip", "netns", "pids", name])
+    try:
+        output = run_command(["ip", "netns", "pids", name])
+    except CommandError:
+        if namespace_exists(name):
+            raise
+        return []  # deleted meanwhile (a concurrent destroy): it holds no process any more
     return [int(line) for line in output.split()]
 
 

@@ -145,8 +145,10 @@ class StateStore:
 
     def delete_node(self, name: str) -> None:
         """Remove a node's directory (record, log, key); no-op when absent."""
-        if self.node_dir(name).exists():
+        try:
             shutil.rmtree(self.node_dir(name))
+        except FileNotFoundError:
+            return
 
     def remove_empty_dirs(self) -> None:
         """Remove this prefix's directories once they hold nothing."""

@@ -1,11 +1,12 @@
 """Remove whatever carries a prefix but has no record any more (its state_dir was lost)."""
 
+import shutil
 from pathlib import Path
 
 from provisioners.local import netns, processes
 from provisioners.local.cgroups import remove_cgroup_dirs
 from provisioners.local.commands import run_command
-from provisioners.local.host import KILL_WAIT_SECONDS
+from provisioners.local.host import KILL_WAIT_SECONDS, NSPAWN_PROPAGATE_DIR
 
 CGROUP_ROOT = Path("/sys/fs/cgroup")
 MOUNTS = Path("/proc/mounts")
@@ -28,6 +29,10 @@ def sweep_prefix(prefix: str) -> list[str]:
                 processes.kill(launcher, KILL_WAIT_SECONDS)
         removed.append(f"cgroup {cgroup}")
     remove_cgroup_dirs(cgroups, KILL_WAIT_SECONDS)
+    for leftover in sorted(NSPAWN_PROPAGATE_DIR.glob(f"{owned}*")):
+        # Left by hosts of versions that did not give nspawn a private propagation dir.
+        shutil.rmtree(leftover)
+        removed.append(f"directory {leftover}")
     for line in MOUNTS.read_text().splitlines():
         source, mount_point = line.split()[:2]
         if source == f"{prefix}-hosts":
