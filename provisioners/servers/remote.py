@@ -84,8 +84,9 @@ if [ ! -d "$originals" ]; then
   if command -v iptables-save > /dev/null 2>&1; then
     iptables-save > "$originals.partial/iptables"
   fi
+  # /proc/sys rather than sysctl(8): procps is not on every minimal system
   for key in {sysctl_keys}; do
-    printf '%s=%s\\n' "$key" "$(sysctl -n "$key")"
+    printf '%s=%s\\n' "$key" "$(cat "/proc/sys/$(printf %s "$key" | tr . /)")"
   done > "$originals.partial/sysctl"
   mv "$originals.partial" "$originals"
 fi
@@ -123,7 +124,9 @@ if [ -d "$originals" ]; then
     done
     iptables-restore -w 10 < "$originals/iptables"
   fi
-  while read -r setting; do sysctl -q -w "$setting"; done < "$originals/sysctl"
+  while IFS== read -r key value; do
+    printf '%s\\n' "$value" > "/proc/sys/$(printf %s "$key" | tr . /)"
+  done < "$originals/sysctl"
   rm -rf {work_dir}
 fi
 """
