@@ -228,11 +228,20 @@ def leaderboard() -> ResponseReturnValue:
 
 @bp.app_template_global("competition_now")
 def competition_now(user: User) -> dict[str, Any]:
-    """Return what a dashboard shows of the competition: open tasks and the live run."""
-    if user.team_id is None and not user.has_role(Role.OFFICER):
-        return {"open": [], "live": None}
-    live = run_service.live_run(user.team_id) if user.team_id is not None else None
-    return {"open": schedule.open_tasks(user, user.team_id), "live": live}
+    """Return what a dashboard shows of the competition: open tasks and live runs."""
+    if user.has_role(Role.OFFICER):
+        live = db.session.scalars(
+            run_service.visible_runs(user).where(Run.state.in_(run_service.LIVE))
+        ).all()
+        return {"open": schedule.open_tasks(user), "live": None, "live_runs": live}
+    if user.team_id is None:
+        return {"open": [], "live": None, "live_runs": []}
+    live_run = run_service.live_run(user.team_id)
+    return {
+        "open": schedule.open_tasks(user, user.team_id),
+        "live": live_run,
+        "live_runs": [live_run] if live_run else [],
+    }
 
 
 @bp.app_template_filter("in_zone")

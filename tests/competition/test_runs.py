@@ -157,3 +157,35 @@ def test_the_beat_restarts_a_failed_stop_job_a_few_times_then_leaves_it(
             job.state = JobState.FAILED
         db.session.commit()
         assert supervise_runs() == (1 if attempt < MAX_STOP_ATTEMPTS else 0)
+
+
+def test_the_beat_stops_runs_at_the_end_of_the_window_and_past_the_timeout(
+    app: Flask, people: dict[str, User | None], team_a: Team, constellation: Constellation
+) -> None:
+    from cloudsim.competition.engine import supervise_runs
+
+    task = open_task(team_a.id, timeout_s=60)
+    run = runs.start_run(people["user_a"], task.id)
+    run.state, run.running_at = RunState.RUNNING, utcnow() - timedelta(hours=1)
+    db.session.commit()
+    assert supervise_runs() == 1  # an hour past a 60 s timeout (and its grace)
+    assert (run.state, run.stop_reason) == (RunState.STOPPING, "timeout")
+
+    run.state, run.active_constellation_id = RunState.ERROR, None
+    db.session.commit()
+    closing = runs.start_run(people["user_a"], open_task(team_a.id).id)
+    closing.state = RunState.RUNNING
+    closing.task.window_stop = utcnow() - timedelta(seconds=1)
+    db.session.commit()
+    assert supervise_runs() == 1
+    assert (closing.state, closing.stop_reason) == (RunState.STOPPING, "window")
+
+
+def test_the_officer_dashboard_shows_live_runs(
+    app: Flask, people: dict[str, User | None], team_a: Team, constellation: Constellation
+) -> None:
+    run = runs.start_run(people["user_a"], open_task(team_a.id, name="Live one").id)
+    client = app.test_client()
+    log_in(client, people["officer"])  # type: ignore[arg-type]
+    page = client.get("/").get_data(as_text=True)
+    assert "1 task(s) open now" in page and f'/runs/{run.id}"' in page and "starting" in page
