@@ -17,9 +17,10 @@ from cryptography.hazmat.primitives.serialization import (
     PublicFormat,
 )
 from libcloud.compute.base import Node
-from local_support import IS_ROOT, HostShell, SshKey, destroy_everything, open_shell
 
 from provisioners.local.driver import LocalNodeDriver
+
+from .local_support import IS_ROOT, HostShell, SshKey, destroy_everything, open_shell
 
 
 @pytest.fixture

@@ -65,7 +65,7 @@ class HostShell:
 
     client: paramiko.SSHClient
     proxy: _DeferredProxyCommand
-    host_key: paramiko.PKey | None
+    host_key: paramiko.PKey
     closed: bool = field(default=False)
 
     def run(self, command: str, timeout: float = 30.0) -> tuple[int, str, str]:
@@ -84,15 +84,19 @@ class HostShell:
 
     def close(self) -> None:
         """Close the SSH connection and reap the proxy process."""
-        if self.closed:
-            return
-        transport = self.client.get_transport()
-        self.client.close()
-        if transport is not None:
-            transport.join(timeout=10)
-            assert not transport.is_alive(), "paramiko transport thread did not stop"
-        self.proxy.shutdown()
-        self.closed = True
+        if not self.closed:
+            _close_connection(self.client, self.proxy)
+            self.closed = True
+
+
+def _close_connection(client: paramiko.SSHClient, proxy: _DeferredProxyCommand) -> None:
+    """Close the client, wait for its reader thread, then stop and reap the proxy."""
+    transport = client.get_transport()
+    client.close()
+    if transport is not None:
+        transport.join(timeout=10)
+        assert not transport.is_alive(), "paramiko transport thread did not stop"
+    proxy.shutdown()
 
 
 def open_shell(node: Node, key: SshKey) -> HostShell:
@@ -114,7 +118,7 @@ def open_shell(node: Node, key: SshKey) -> HostShell:
             auth_timeout=20,
         )
     except BaseException:
-        HostShell(client=client, proxy=proxy, host_key=policy.host_key).close()
+        _close_connection(client, proxy)
         raise
     assert policy.host_key is not None
     return HostShell(client=client, proxy=proxy, host_key=policy.host_key)

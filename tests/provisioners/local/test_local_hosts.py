@@ -12,11 +12,12 @@ from pathlib import Path
 import pytest
 from libcloud.compute.base import Node
 from libcloud.compute.types import NodeState
-from local_support import HostShell, SshKey, needs_root
 
 from provisioners.local import processes
 from provisioners.local.driver import LocalNodeDriver
 from provisioners.local.network import LocalNetwork
+
+from .local_support import HostShell, SshKey, needs_root
 
 pytestmark = [pytest.mark.hosts, needs_root]
 

@@ -15,7 +15,6 @@ import pytest
 from libcloud.compute.base import Node
 from libcloud.compute.providers import get_driver
 from libcloud.compute.types import NodeState
-from local_support import HostShell, SshKey, mounts_under, needs_root
 
 from provisioners.local import processes, register
 from provisioners.local.cgroups import host_cgroup_dirs
@@ -31,6 +30,8 @@ from provisioners.local.errors import (
 )
 from provisioners.local.netns import list_namespaces
 from provisioners.local.network import LocalNetwork
+
+from .local_support import HostShell, SshKey, mounts_under, needs_root
 
 pytestmark = [pytest.mark.hosts, needs_root]
 
