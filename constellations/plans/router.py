@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import ipaddress
 import shlex
+from collections.abc import Sequence
 from pathlib import Path
 
 from constellations.plans.base import Action, PlanContext, PlanItem, VpnMaterial
@@ -182,7 +183,7 @@ def vpn_server(ctx: PlanContext) -> list[PlanItem]:
     ]
 
 
-def _restart_on_change(name: str, steps: list[PlanItem], unit: str) -> Action:
+def _restart_on_change(name: str, steps: Sequence[PlanItem], unit: str) -> Action:
     """Apply steps in order; if any changed, reload systemd and restart the unit if it runs."""
 
     def run(executor: SSHExecutor, target: Target) -> bool:

@@ -15,7 +15,7 @@ from typing import Any, Protocol
 from csrouter import __version__
 from csrouter.bandwidth_log import BandwidthLog, utc_iso
 from csrouter.config import RouterConfig
-from csrouter.delay import DelayLine, Verdictable
+from csrouter.delay import DelayLine, Lateness, Verdictable
 from csrouter.errors import RulesError
 from csrouter.packets import measure
 from csrouter.rules import missing_rules
@@ -107,6 +107,8 @@ class OcuPath:
         )
         with self.lock:
             self.run, self.faults, self.last_run = run, [], None
+            for line in self.lines.values():
+                line.lateness = Lateness()
             self._next_tick = self._monotonic() + 1.0
             self.log.restart()
             self.log.append([self._event("armed")])
@@ -165,6 +167,8 @@ class OcuPath:
                 "caps_bits": {d: self.run.meters[d].cap_bits for d in DIRECTIONS},
                 "spent": {d: self.run.meters[d].spent for d in DIRECTIONS},
                 "held_packets": {d: len(self.lines[d]) for d in DIRECTIONS},
+                # since the arm: how late csrouter released packets (its own timing error)
+                "release_lateness": {d: self.lines[d].lateness.as_dict() for d in DIRECTIONS},
                 "queues": {
                     "uplink": self.config.uplink_queue,
                     "downlink": self.config.downlink_queue,

@@ -144,6 +144,13 @@ class RouterLab:
         wait_for(lambda: "listening" in self.run(host, f"cat {out}"), 10, f"receiver on {host}")
         return out
 
+    def start_echo(self, host: str, port: int, idle: float) -> None:
+        """Start a UDP echo on a host in the background (it ends after `idle` s of silence)."""
+        out = f"/root/echo-{port}-{time.monotonic_ns()}.out"
+        script = f"python3 {REMOTE_TRAFFIC} echo {port} {idle:g}"
+        self.run(host, f"setsid {script} > {out} 2>&1 < /dev/null &")
+        wait_for(lambda: "listening" in self.run(host, f"cat {out}"), 10, f"echo on {host}")
+
     def received(self, host: str, out: str, timeout: float = 30) -> dict[str, int]:
         """Wait for a UDP counter's result."""
         lines = wait_for(
