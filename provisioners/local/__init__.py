@@ -5,8 +5,8 @@ namespace wired to it by a veth pair, an overlay of this machine's "/" (upper di
 under state_dir) and either systemd booted by systemd-nspawn or tini running sshd, in fresh
 PID/mount/UTS/IPC namespaces. Records under state_dir/<prefix>/ let any later driver find,
 report and destroy what an earlier one made. Modules: driver (the libcloud API), network and
-nodes (lifecycles), host (boot/stop one host), netns, cgroups, processes, state, addresses,
-sweep (leaks without records).
+nodes (lifecycles), host and boot_scripts (boot/stop one host), netns, cgroups, processes,
+state, addresses, sweep (leaks without records).
 
 Hosts hide the controller's secrets (hidden paths), get their own /dev, read-only kernel
 tunables and fewer capabilities, but they are no security boundary against root inside them

@@ -10,7 +10,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from provisioners.local import processes
+from provisioners.local import boot_scripts, processes
 from provisioners.local.commands import run_command
 from provisioners.local.errors import CommandError, HostBootError, InvalidRequestError
 from provisioners.local.netns import can_connect, netns_path
@@ -32,131 +32,6 @@ LAUNCH_SECONDS = 30.0
 LAUNCHER_EXIT_SECONDS = 5.0
 KILL_WAIT_SECONDS = 10.0
 POLL_SECONDS = 0.05
-
-# Runs outside the host's root (in the launcher's private mount namespace), on first boot only:
-# later boots (reboot_node) must not trust paths the host itself may have replaced by symlinks.
-_FIRST_BOOT = r"""
-first_boot() {
-  local root=$1 hostname=$2 machine_id=$3 authorized_keys=$4
-  shift 4
-  local marker=$root/var/lib/cloudsim-local-first-boot
-  [ -e "$marker" ] && return 0
-  printf '%s\n' "$hostname" > "$root/etc/hostname"
-  printf '%s\n' "$machine_id" > "$root/etc/machine-id"
-  printf '127.0.0.1\tlocalhost\n127.0.1.1\t%s\n' "$hostname" > "$root/etc/hosts"
-  rm -f "$root"/etc/ssh/ssh_host_*
-  # Own host keys; no RSA key: it costs ~0.5 s of CPU per host and modern clients never need it.
-  local key_type
-  for key_type in ed25519 ecdsa; do
-    ssh-keygen -q -t "$key_type" -N '' -C "root@$hostname" \
-      -f "$root/etc/ssh/ssh_host_${key_type}_key"
-  done
-  install -d -m 755 "$root/etc/ssh/sshd_config.d"
-  printf 'HostKey /etc/ssh/ssh_host_%s_key\n' ed25519 ecdsa \
-    > "$root/etc/ssh/sshd_config.d/cloudsim-host-keys.conf"
-  install -d -m 700 "$root/root/.ssh"
-  # /root is hidden from the host (see hide_paths): give root its stock dotfiles back.
-  local dotfile
-  for dotfile in bashrc profile; do
-    if [ -e "/usr/share/base-files/dot.$dotfile" ] && [ ! -e "$root/root/.$dotfile" ]; then
-      install -m 644 "/usr/share/base-files/dot.$dotfile" "$root/root/.$dotfile"
-    fi
-  done
-  install -m 600 "$authorized_keys" "$root/root/.ssh/authorized_keys"
-  local unit
-  for unit in "$@"; do ln -sfn /dev/null "$root/etc/systemd/system/$unit"; done
-  touch "$marker"
-}
-"""
-
-_MOUNT_OVERLAY = r"""
-root=$host_dir/root
-mount -t overlay "$machine" \
-  -o "lowerdir=/,upperdir=$host_dir/upper,workdir=$host_dir/work" "$root"
-"""
-
-# PID 1 of fresh mount/UTS/IPC/PID namespaces, already inside the host's network namespace.
-_MINIMAL_INIT = (
-    "set -euo pipefail\n"
-    + "DROPPED_CAPABILITIES=-mknod,-dac_read_search,-sys_module,-sys_rawio,-sys_time,-sys_boot\n"
-    + _FIRST_BOOT
-    + "host_dir=$1 hostname=$2 machine=$3 machine_id=$4 authorized_keys=$5\n"
-    + _MOUNT_OVERLAY
-    + r"""
-first_boot "$root" "$hostname" "$machine_id" "$authorized_keys"
-mount -t proc proc "$root/proc"
-# Like nspawn: kernel tunables read-only, only this host's network ones (ip_forward) writable.
-mount --bind "$root/proc/sys" "$root/proc/sys"
-mount -o remount,bind,ro "$root/proc/sys"
-mount --bind /proc/sys/net "$root/proc/sys/net"
-mount -t sysfs -o ro sysfs "$root/sys"
-# A /dev of its own: the machine's disks must not be reachable from inside.
-mount -t tmpfs -o mode=755,nosuid tmpfs "$root/dev"
-for node in null:1:3 zero:1:5 full:1:7 random:1:8 urandom:1:9 tty:5:0; do
-  IFS=: read -r name major minor <<< "$node"
-  mknod -m 666 "$root/dev/$name" c "$major" "$minor"
-done
-install -d -m 755 "$root/dev/net" "$root/dev/pts" "$root/dev/shm"
-mknod -m 600 "$root/dev/net/tun" c 10 200
-mount -t devpts -o newinstance,ptmxmode=0666,mode=0620,gid=5 devpts "$root/dev/pts"
-ln -s pts/ptmx "$root/dev/ptmx"
-mount -t tmpfs -o mode=1777,nosuid,nodev tmpfs "$root/dev/shm"
-ln -s /proc/self/fd "$root/dev/fd"
-ln -s /proc/self/fd/0 "$root/dev/stdin"
-ln -s /proc/self/fd/1 "$root/dev/stdout"
-ln -s /proc/self/fd/2 "$root/dev/stderr"
-mount -t tmpfs -o mode=755 tmpfs "$root/run"
-mount -t tmpfs -o mode=1777 tmpfs "$root/tmp"
-install -d -m 755 "$root/run/sshd"
-hostname "$hostname"
-# pivot_root, not chroot: root inside could simply chroot back out of a chroot.
-install -d -m 700 "$root/run/old-root"
-cd "$root"
-pivot_root . run/old-root
-cd /
-umount --lazy /run/old-root
-rmdir /run/old-root
-exec setpriv --bounding-set "$DROPPED_CAPABILITIES" -- /usr/bin/tini -s -- /usr/sbin/sshd -D -e
-"""
-)
-
-# Runs in a private mount namespace, so the overlay and nspawn's propagation directory vanish
-# with the host instead of lingering in the root mount table.
-_SYSTEMD_BOOT = (
-    "set -euo pipefail\n"
-    + _FIRST_BOOT
-    + "host_dir=$1 hostname=$2 machine=$3 machine_id=$4 authorized_keys=$5 netns=$6\n"
-    + "shift 6\n"
-    + _MOUNT_OVERLAY
-    + r"""
-first_boot "$root" "$hostname" "$machine_id" "$authorized_keys" "$@"
-propagate=/run/systemd/nspawn/propagate
-mkdir -p "$propagate"
-mount -t tmpfs -o mode=700 "$machine-propagate" "$propagate"
-tun=()
-if [ -c /dev/net/tun ]; then tun=(--bind=/dev/net/tun); fi
-exec systemd-nspawn --quiet --directory="$root" --boot --machine="$machine" \
-  --hostname="$hostname" --register=no --keep-unit --console=passive \
-  --capability=CAP_NET_ADMIN --drop-capability=CAP_MKNOD,CAP_DAC_READ_SEARCH "${tun[@]}" \
-  --network-namespace-path="/run/netns/$netns"
-"""
-)
-
-# Records the launcher's PID (as seen from the root namespace) and moves it into the host's
-# own cgroups (see cgroups.py) before becoming the launcher.
-_LAUNCHER = r"""
-set -eu
-printf '%s\n' "$$" > "$1"
-cgroup_count=$2
-shift 2
-while [ "$cgroup_count" -gt 0 ]; do
-  mkdir -p "$1"
-  printf '%s\n' "$$" > "$1/cgroup.procs"
-  shift
-  cgroup_count=$((cgroup_count - 1))
-done
-exec "$@"
-"""
 
 # Paths of the controller that no host may read through the overlay's lower layer "/":
 # its users' keys and dotfiles, server data, scratch space.
@@ -268,7 +143,7 @@ def launch_command(spec: HostSpec, masked_units: list[str]) -> list[str]:
         inner = [
             "env", "SYSTEMD_NSPAWN_API_VFS_WRITABLE=network",
             "unshare", "--mount", "--propagation", "private", "--",
-            "bash", "-c", _SYSTEMD_BOOT, "host-boot",
+            "bash", "-c", boot_scripts.SYSTEMD_BOOT, "host-boot",
             *common, str(spec.authorized_keys), spec.netns, *masked_units,
         ]  # fmt: skip
     else:
@@ -276,12 +151,13 @@ def launch_command(spec: HostSpec, masked_units: list[str]) -> list[str]:
             "nsenter", f"--net={netns_path(spec.netns)}",
             "unshare", "--mount", "--uts", "--ipc", "--pid", "--fork", "--kill-child",
             "--propagation", "private", "--",
-            "bash", "-c", _MINIMAL_INIT, "host-init", *common, str(spec.authorized_keys),
+            "bash", "-c", boot_scripts.MINIMAL_INIT, "host-init",
+            *common, str(spec.authorized_keys),
         ]  # fmt: skip
     # setsid -f detaches the launcher: it must outlive (and not be reaped by) this process.
     cgroups = [str(len(spec.cgroup_dirs)), *map(str, spec.cgroup_dirs)]
     return [
-        "setsid", "-f", "bash", "-c", _LAUNCHER, "launcher",
+        "setsid", "-f", "bash", "-c", boot_scripts.LAUNCHER, "launcher",
         str(spec.launcher_pidfile), *cgroups, *inner,
     ]  # fmt: skip
 

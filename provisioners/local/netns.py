@@ -1,6 +1,5 @@
 """Network namespaces, bridges and veth pairs, built with `ip` and never in the root namespace."""
 
-import os
 from pathlib import Path
 
 from provisioners.local.commands import command_succeeds, run_command
@@ -78,15 +77,6 @@ def plug_into_switch(
 def add_default_route(namespace: str, via: str) -> None:
     """Route everything not on a local subnet through `via`."""
     run_command(["ip", "-n", namespace, "route", "add", "default", "via", via])
-
-
-def namespace_inode(name: str) -> tuple[int, int] | None:
-    """Return (device, inode) identifying the namespace behind `name`, None when absent."""
-    try:
-        status = os.stat(netns_path(name))
-    except FileNotFoundError:
-        return None
-    return status.st_dev, status.st_ino
 
 
 def namespace_pids(name: str) -> list[int]:

@@ -4,12 +4,14 @@ import os
 import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import paramiko
 import pytest
 from libcloud.compute.base import Node, NodeAuthSSHKey
 
 from provisioners.local.driver import LocalNodeDriver
+from provisioners.local.network import LocalNetwork
 
 IS_ROOT = os.geteuid() == 0
 needs_root = pytest.mark.skipif(not IS_ROOT, reason="local hosts need root")
@@ -122,6 +124,13 @@ def open_shell(node: Node, key: SshKey) -> HostShell:
         raise
     assert policy.host_key is not None
     return HostShell(client=client, proxy=proxy, host_key=policy.host_key)
+
+
+def create_host(
+    driver: LocalNodeDriver, name: str, network: LocalNetwork, key: SshKey, **options: Any
+) -> Node:
+    """Create a host on network that accepts key, with create_node's ex_ options."""
+    return driver.create_node(name, None, None, auth=key.auth, ex_network=network, **options)
 
 
 def destroy_everything(state_dir: Path, prefix: str) -> list[str]:
