@@ -67,6 +67,9 @@ def run_demo(ctx: JobContext) -> None:
     ctx.stage("constellation", 10)
     _await(ctx, lambda: _ready(constellation_id), "the constellation to be ready")
     run = db.session.scalar(select(Run).where(Run.task_id == task.id).order_by(Run.id.desc()))
+    if run is not None and run.state in (RunState.STOPPING, RunState.FINISHED):
+        ctx.log(f"the demo run {run.id} has run already ({run.state.value})")
+        return
     if run is None or run.state == RunState.ERROR:
         ctx.stage("start", 40)
         run = start_run(None, task.id, constellation_id)
