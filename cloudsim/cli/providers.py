@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import sys
+from typing import TextIO
 
 import click
+import yaml
 
 from cloudsim.audit.service import record
 from cloudsim.cli import app_context, emit, reports_errors
@@ -18,8 +20,12 @@ def provider() -> None:
     """Configure and list the providers constellations can be launched on."""
 
 
-@provider.command("configure")
-@click.argument("name", type=click.Choice(["ec2"]))
+@provider.group("configure")
+def configure() -> None:
+    """Store a provider's settings, encrypted; launches use them from then on."""
+
+
+@configure.command("ec2")
 @click.option("--region", required=True, help="e.g. us-east-1")
 @click.option("--access-key", required=True, help="Access key id.")
 @click.option(
@@ -38,8 +44,7 @@ def provider() -> None:
 )
 @click.option("--endpoint", help="An EC2-compatible API URL instead of AWS's.")
 @reports_errors
-def configure(
-    name: str,
+def configure_ec2(
     region: str,
     access_key: str,
     secret_key_stdin: bool,
@@ -47,7 +52,7 @@ def configure(
     sizes: tuple[str, ...],
     endpoint: str | None,
 ) -> None:
-    """Store a provider's settings, encrypted; launches use them from then on."""
+    """Amazon EC2 (or an EC2-compatible API): credentials, region, image, instance types."""
     secret = sys.stdin.readline().strip()
     size_map = {}
     for item in sizes:
@@ -65,17 +70,51 @@ def configure(
         }
         if endpoint:
             settings["endpoint"] = endpoint
-        configure_provider(name, settings)
+        configure_provider("ec2", settings)
         record(
             "provider.configure",
             None,
             target_type="provider",
-            target_id=name,
+            target_id="ec2",
             region=region,
             image=image,
         )
         db.session.commit()
-        click.echo(f"{name} configured (region {region}, image {image})")
+        click.echo(f"ec2 configured (region {region}, image {image})")
+
+
+@configure.command("servers")
+@click.option(
+    "--inventory",
+    "inventory_file",
+    required=True,
+    type=click.File("r"),
+    help="YAML list of servers (name, address, private_ip, network, cidr, "
+    "private_key, ...); see provisioners/servers/README.md.",
+)
+@reports_errors
+def configure_servers(inventory_file: TextIO) -> None:
+    """Existing machines reachable by SSH (e.g. bare-metal servers), from an inventory file."""
+    try:
+        inventory = yaml.safe_load(inventory_file)
+    except yaml.YAMLError as exc:
+        raise click.ClickException(f"{inventory_file.name}: not YAML: {exc}") from None
+    if not isinstance(inventory, list):
+        raise click.ClickException(f"{inventory_file.name}: expected a list of servers")
+    with app_context():
+        configure_provider("servers", {"inventory": inventory})
+        record(
+            "provider.configure",
+            None,
+            target_type="provider",
+            target_id="servers",
+            servers=len(inventory),
+        )
+        db.session.commit()
+        click.echo(
+            f"servers configured ({len(inventory)} servers); keep the file safe or "
+            "delete it: the keys are now stored encrypted"
+        )
 
 
 @provider.command("list")
@@ -94,7 +133,7 @@ def list_providers(as_json: bool) -> None:
             except CloudSimError:
                 rows.append({"name": name, "configured": False, "region": None})
             else:
-                rows.append({"name": name, "configured": True, "region": settings["region"]})
+                rows.append({"name": name, "configured": True, "region": settings.get("region")})
         lines = "\n".join(
             f"{r['name']}\t{'configured' if r['configured'] else 'not configured'}"
             f"\t{r['region'] or ''}".rstrip()

@@ -74,14 +74,20 @@ def _target(
     jump: Target | None,
 ) -> Target:
     name = target_name(constellation, machine.name)
-    proxy = node.extra.get("ssh_proxy_command") if node is not None else None
-    if proxy:
+    extra = node.extra if node is not None else {}
+    login = {"user": extra.get("ssh_user", "root"), "port": int(extra.get("ssh_port", 22))}
+    if extra.get("ssh_proxy_command"):
         return Target(
             name=name,
             host=machine.private_ip or "",
             private_key=keys.private,
-            proxy_command=list(proxy),
+            proxy_command=list(extra["ssh_proxy_command"]),
+            **login,
         )
-    if machine.public_ip:
-        return Target(name=name, host=machine.public_ip, private_key=keys.private)
-    return Target(name=name, host=machine.private_ip or "", private_key=keys.private, jump=jump)
+    # Existing servers say where the controller reaches them; cloud machines do not.
+    address = extra.get("ssh_address") or machine.public_ip
+    if address:
+        return Target(name=name, host=address, private_key=keys.private, **login)
+    return Target(
+        name=name, host=machine.private_ip or "", private_key=keys.private, jump=jump, **login
+    )

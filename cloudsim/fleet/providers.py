@@ -19,7 +19,7 @@ from cloudsim.errors import InvalidInput
 from cloudsim.extensions import db
 from cloudsim.models import Secret, SecretKind
 
-PROVIDERS = ("local", "ec2")
+PROVIDERS = ("local", "ec2", "servers")
 SETTINGS_PREFIX = "provider:"
 EC2_FIELDS = ("access_key", "secret_key", "region", "image", "sizes", "endpoint")
 
@@ -118,6 +118,16 @@ def open_provider(name: str, config: Config) -> Provider:
             sizes=settings.get("sizes") or {},
             image_id=settings["image"],
         )
+    if name == "servers":
+        from provisioners.servers import register as register_servers
+        from provisioners.servers.driver import ServersNodeDriver
+
+        register_servers()
+        servers = ServersNodeDriver(
+            inventory=provider_settings("servers")["inventory"],
+            state_dir=str(config.instance_dir / "servers"),
+        )
+        return Provider("servers", cast(NetworkDriver, servers))
     raise InvalidInput(f"unknown provider {name!r}; known: {', '.join(PROVIDERS)}")
 
 
@@ -131,6 +141,30 @@ def _endpoint(url: str | None) -> dict[str, Any]:
     if parts.scheme not in ("http", "https") or not parts.hostname:
         raise InvalidInput(f"endpoint must be an http(s) URL, got {url!r}")
     return {"host": parts.hostname, "port": parts.port, "secure": parts.scheme == "https"}
+
+
+def _check_ec2(settings: dict[str, Any]) -> None:
+    missing = [
+        key for key in ("access_key", "secret_key", "region", "image") if not settings.get(key)
+    ]
+    if missing:
+        raise InvalidInput(f"ec2 needs {', '.join(missing)}")
+    unknown = sorted(set(settings) - set(EC2_FIELDS))
+    if unknown:
+        raise InvalidInput(f"unknown ec2 settings: {', '.join(unknown)}")
+    _endpoint(settings.get("endpoint"))
+
+
+def _check_servers(settings: dict[str, Any]) -> None:
+    from provisioners.servers.errors import ServersProviderError
+    from provisioners.servers.inventory import Inventory
+
+    if set(settings) != {"inventory"}:
+        raise InvalidInput("servers settings are {'inventory': [...server entries...]}")
+    try:
+        Inventory.of(settings["inventory"])
+    except (ServersProviderError, TypeError, ValueError) as exc:
+        raise InvalidInput(f"servers inventory: {exc}") from None
 
 
 def provider_settings(name: str) -> dict[str, Any]:
@@ -149,18 +183,13 @@ def provider_settings(name: str) -> dict[str, Any]:
 
 
 def configure_provider(name: str, settings: dict[str, Any]) -> None:
-    """Store (encrypted) a cloud provider's settings, replacing earlier ones."""
-    if name != "ec2":
-        raise InvalidInput(f"provider {name!r} takes no settings; configurable: ec2")
-    missing = [
-        key for key in ("access_key", "secret_key", "region", "image") if not settings.get(key)
-    ]
-    if missing:
-        raise InvalidInput(f"ec2 needs {', '.join(missing)}")
-    unknown = sorted(set(settings) - set(EC2_FIELDS))
-    if unknown:
-        raise InvalidInput(f"unknown ec2 settings: {', '.join(unknown)}")
-    _endpoint(settings.get("endpoint"))
+    """Store (encrypted) a provider's settings, replacing earlier ones; refuse bad ones."""
+    if name == "ec2":
+        _check_ec2(settings)
+    elif name == "servers":
+        _check_servers(settings)
+    else:
+        raise InvalidInput(f"provider {name!r} takes no settings; configurable: ec2, servers")
     secret = db.session.scalar(
         select(Secret).where(
             Secret.owner_type == "installation", Secret.name == SETTINGS_PREFIX + name

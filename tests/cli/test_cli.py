@@ -43,7 +43,12 @@ def test_help_lists_the_commands() -> None:
 
 
 def test_db_current_and_downgrade(run: Callable[..., Result]) -> None:
-    assert run("db", "current").output.strip() == "0001"
+    from alembic.script import ScriptDirectory
+
+    from cloudsim.app import PROJECT_ROOT
+
+    head = ScriptDirectory(str(PROJECT_ROOT / "migrations")).get_current_head()
+    assert run("db", "current").output.strip() == head
     assert "base" in run("db", "downgrade", "base").output
     assert "empty database" in run("db", "current").output
 
@@ -107,3 +112,67 @@ def test_duplicate_team_is_refused(run: Callable[..., Result]) -> None:
     run("team", "create", "Dup")
     result = run("team", "create", "dup")
     assert result.exit_code == 1 and "already exists" in result.output
+
+
+def test_providers_are_configured_with_clear_errors(
+    run: Callable[..., Result], tmp_path: Path
+) -> None:
+    from cloudsim.fleet.keys import generate_keypair
+
+    assert "ec2\tnot configured" in run("provider", "list").output
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("- {name: s1, address: 10.9.0.5}\n")
+    result = run("provider", "configure", "servers", "--inventory", str(bad))
+    assert result.exit_code == 1 and "servers inventory:" in result.output
+    key = generate_keypair("inventory").private
+    good = tmp_path / "servers.yaml"
+    entry = {
+        "name": "s1",
+        "address": "10.9.0.5",
+        "private_ip": "10.9.0.5",
+        "network": "rack",
+        "cidr": "10.9.0.0/24",
+        "private_key": key,
+    }
+    good.write_text(json.dumps([entry]))  # JSON is YAML
+    result = run("provider", "configure", "servers", "--inventory", str(good))
+    assert result.exit_code == 0, result.output
+    assert "servers\tconfigured" in run("provider", "list").output
+    ec2 = run(
+        "provider",
+        "configure",
+        "ec2",
+        "--region",
+        "us-east-1",
+        "--access-key",
+        "AKID",
+        "--secret-key-stdin",
+        "--image",
+        "ami-1",
+        "--size",
+        "gpu",
+        stdin="s3cr3t\n",
+    )
+    assert ec2.exit_code == 2 and "'gpu' is not LOGICAL=TYPE" in ec2.output
+    ec2 = run(
+        "provider",
+        "configure",
+        "ec2",
+        "--region",
+        "us-east-1",
+        "--access-key",
+        "AKID",
+        "--secret-key-stdin",
+        "--image",
+        "ami-1",
+        "--size",
+        "gpu=g4dn.xlarge",
+        stdin="s3cr3t\n",
+    )
+    assert ec2.exit_code == 0 and "s3cr3t" not in ec2.output
+    listed = json.loads(run("provider", "list", "--json").output)
+    assert {p["name"]: p["configured"] for p in listed} == {
+        "local": True,
+        "ec2": True,
+        "servers": True,
+    }
