@@ -352,8 +352,24 @@ def follow(run: Run, config: Config) -> str | None:
     )
     with machines(run, config) as reach:
         output = reach.executor.run(reach.sim, command, timeout=30).stdout
+        if reach.router is not None:
+            _count_bits(run, reach)
     lines, _, status = output.rpartition("#\n")
     result = read_score_log(lines.splitlines())
     run.score, run.falls, run.sim_seconds = result.score, result.falls, result.sim_seconds
     db.session.commit()
     return "ended" if ("final" in status or "inactive" in status) else None
+
+
+def _count_bits(run: Run, reach: Machines) -> None:
+    """Show the bits used so far (the bandwidth log gives the final figures at the end)."""
+    assert reach.router is not None
+    try:
+        counts = router_control.counters(reach.executor, reach.router)
+        uplink = int(counts["uplink"]["accepted"]["payload_bytes"])
+        downlink = int(counts["downlink"]["accepted"]["payload_bytes"])
+    except (CloudSimError, KeyError, TypeError, ValueError) as exc:
+        # the run's end is still detected; only the live figure waits for the next beat
+        log.warning("run %s: cannot read the router's counters: %s", run.id, exc)
+        return
+    run.uplink_bits_used, run.downlink_bits_used = 8 * uplink, 8 * downlink

@@ -180,6 +180,7 @@ def run_status(run_id: int) -> ResponseReturnValue:
         sim_seconds=round(shown.sim_seconds, 2),
         end_reason=shown.end_reason,
         error=shown.error,
+        bits_left=_bits_left(shown),
     )
 
 

@@ -189,3 +189,44 @@ def test_the_officer_dashboard_shows_live_runs(
     log_in(client, people["officer"])  # type: ignore[arg-type]
     page = client.get("/").get_data(as_text=True)
     assert "1 task(s) open now" in page and f'/runs/{run.id}"' in page and "starting" in page
+
+
+def test_the_run_page_shows_plots_bits_left_and_logs_to_download(
+    app: Flask,
+    people: dict[str, User | None],
+    team_a: Team,
+    constellation: Constellation,
+    tmp_path: Path,
+) -> None:
+    from cloudsim.competition.artifacts import LogStore, file_sha256
+    from cloudsim.models import Artifact
+    from tests.competition.test_scoring import bandwidth_log
+
+    run = finished_run(open_task(team_a.id), constellation.id, tmp_path, score=1)
+    run.uplink_bits_used = 32_000
+    path = tmp_path / "bandwidth.jsonl"
+    path.write_text("\n".join(bandwidth_log()))
+    store = LogStore(app.config["CLOUDSIM"])
+    store.put(path, store.object_name(run.id, path.name))
+    db.session.add(
+        Artifact(
+            run_id=run.id,
+            kind="bandwidth",
+            filename=path.name,
+            location=store.object_name(run.id, path.name),
+            size=path.stat().st_size,
+            sha256=file_sha256(path),
+        )
+    )
+    db.session.commit()
+    client = app.test_client()
+    log_in(client, people["user_a"])  # type: ignore[arg-type]
+    page = client.get(f"/runs/{run.id}").get_data(as_text=True)
+    assert page.count("<svg") == 5 and "Score timeline" in page and "cap 80k" in page
+    assert "968,000" in page  # 1,000,000 uplink bits minus 32,000 used
+    status = client.get(f"/runs/{run.id}/status").json
+    assert status["state"] == "finished" and status["bits_left"]["uplink"] == 968_000
+    artifact = next(a for a in run.artifacts if a.filename == "bandwidth.jsonl")
+    download = client.get(f"/runs/{run.id}/logs/{artifact.id}")
+    assert download.data == path.read_bytes()
+    assert download.headers["X-Checksum-SHA256"] == artifact.sha256
