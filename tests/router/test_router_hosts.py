@@ -52,7 +52,7 @@ def ocu_address(lab: RouterLab) -> str:
 
 
 def test_uplink_udp_payload_is_counted_exactly(lab: RouterLab) -> None:
-    lab.csrouter("arm", "--latency-ms", "0", "--run-id", "count")
+    lab.csrouter("arm", "--latency-ms", str(LATENCY_MS), "--run-id", "count")
     out = lab.start_receiver("sim", PORT, timeout=20, idle=1.5)
     lab.send_udp("ocu", lab.ip("sim"), PORT, count=1000, size=1000, pps=2000)
     assert lab.received("sim", out) == {"datagrams": 1000, "bytes": 1_000_000}
@@ -65,7 +65,9 @@ def test_uplink_udp_payload_is_counted_exactly(lab: RouterLab) -> None:
 
 def test_past_the_uplink_cap_the_sim_gets_exactly_what_fitted(lab: RouterLab) -> None:
     cap_bits = 8 * 1000 * 300 + 4000  # 300 datagrams and half of one more
-    lab.csrouter("arm", "--latency-ms", "0", "--uplink-bits", str(cap_bits), "--run-id", "up")
+    lab.csrouter(
+        "arm", "--latency-ms", str(LATENCY_MS), "--uplink-bits", str(cap_bits), "--run-id", "up"
+    )
     out = lab.start_receiver("sim", PORT, timeout=20, idle=1.5)
     lab.send_udp("ocu", lab.ip("sim"), PORT, count=500, size=1000, pps=2000)
     assert lab.received("sim", out) == {"datagrams": 300, "bytes": 300_000}
@@ -78,7 +80,9 @@ def test_past_the_uplink_cap_the_sim_gets_exactly_what_fitted(lab: RouterLab) ->
 
 def test_past_the_downlink_cap_the_ocu_gets_exactly_what_fitted(lab: RouterLab) -> None:
     cap_bits = 8 * 700 * 250
-    lab.csrouter("arm", "--latency-ms", "0", "--downlink-bits", str(cap_bits), "--run-id", "down")
+    lab.csrouter(
+        "arm", "--latency-ms", str(LATENCY_MS), "--downlink-bits", str(cap_bits), "--run-id", "down"
+    )
     ocu_vpn = ocu_address(lab)
     out = lab.start_receiver("ocu", PORT, timeout=20, idle=1.5)
     lab.send_udp("sim", ocu_vpn, PORT, count=400, size=700, pps=2000)
