@@ -16,7 +16,7 @@ from csrouter import __version__
 from csrouter.bandwidth_log import BandwidthLog, utc_iso
 from csrouter.config import RouterConfig
 from csrouter.delay import DelayLine, Lateness, Verdictable
-from csrouter.errors import RulesError
+from csrouter.errors import RouterError, RulesError
 from csrouter.packets import measure
 from csrouter.rules import missing_rules
 from csrouter.run import DIRECTIONS, Run, SavedState
@@ -51,7 +51,7 @@ class OcuPath:
         self.last_run: dict[str, Any] | None = None
         self.faults: list[str] = []
         self.run = Run(latency_ms=config.default_latency_ms)
-        self._resume(SavedState.read(config.state_file))
+        self._resume(self._read_state())
         self._next_tick = self._first_tick()
         # from now on a crash, however early, shows as an unclean exit at the next start
         self._save(clean_exit=False)
@@ -184,10 +184,20 @@ class OcuPath:
             self._save(clean_exit=True)
             self.log.close()
 
+    def _read_state(self) -> SavedState | None:
+        try:
+            return SavedState.read(self.config.state_file)
+        except (ValueError, KeyError, TypeError, RouterError) as exc:
+            # starting without it beats a restart loop that keeps OCU traffic stopped
+            aside = f"{self.config.state_file}.unreadable"
+            os.replace(self.config.state_file, aside)
+            self.faults.append(f"the saved run was unreadable ({exc}; kept as {aside})")
+            return None
+
     def _resume(self, saved: SavedState | None) -> None:
         if saved is None:
             return
-        self.run, self.faults = saved.run, saved.faults
+        self.run, self.faults = saved.run, saved.faults + self.faults
         if not saved.clean_exit:
             self.faults.append(
                 f"csrouter restarted after an unclean exit (last saved {utc_iso(saved.saved_at)}): "

@@ -9,6 +9,7 @@ import pytest
 from csrouter.bandwidth_log import BandwidthLog
 from csrouter.config import RouterConfig, check_cap, check_latency, load_config
 from csrouter.errors import ConfigError
+from csrouter.ocu_path import OcuPath
 from csrouter.packets import PacketSize
 from csrouter.run import Run, SavedState
 
@@ -65,3 +66,59 @@ def test_the_bandwidth_log_restarts_and_keeps_the_previous_run(tmp_path: Path) -
 def test_router_config_defaults_match_the_plan() -> None:
     config = RouterConfig(lan_subnet="10.0.0.0/24")
     assert (config.uplink_queue, config.downlink_queue, config.default_latency_ms) == (0, 1, 250)
+
+
+class Clock:
+    """A clock the test moves by hand (both monotonic and wall time)."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def router_config(tmp_path: Path) -> RouterConfig:
+    return RouterConfig(
+        lan_subnet="10.0.0.0/24",
+        bandwidth_log=str(tmp_path / "bandwidth.log"),
+        state_file=str(tmp_path / "state.json"),
+        socket=str(tmp_path / "control.sock"),
+    )
+
+
+def test_an_armed_run_logs_every_whole_second_and_its_end(tmp_path: Path) -> None:
+    clock = Clock()
+    path = OcuPath(router_config(tmp_path), monotonic=clock, wall=clock)
+    path.arm(100, 8000, None, "r1")
+    clock.now += 3.5
+    path.service()
+    final = path.disarm()
+    path.save_on_exit()
+    records = [json.loads(line) for line in (tmp_path / "bandwidth.log").read_text().splitlines()]
+    assert [r.get("event") or r["direction"] for r in records] == [
+        "armed", *["uplink", "downlink"] * 3, "disarmed"
+    ]  # fmt: skip
+    assert records[1]["cap_remaining_bits"] == 8000 and final["elapsed_s"] == 3.5
+    assert path.counters()["last_run"] == final and not path.counters()["armed"]
+
+
+def test_a_restart_after_a_crash_resumes_the_run_with_a_fault(tmp_path: Path) -> None:
+    clock = Clock()
+    crashed = OcuPath(router_config(tmp_path), monotonic=clock, wall=clock)
+    crashed.arm(100, None, None, "r1")
+    crashed.log.close()  # what dying does; no clean exit is saved
+    resumed = OcuPath(router_config(tmp_path), monotonic=clock, wall=clock)
+    assert resumed.run.run_id == "r1" and "unclean exit" in resumed.faults[0]
+    resumed.save_on_exit()
+    again = OcuPath(router_config(tmp_path), monotonic=clock, wall=clock)
+    again.save_on_exit()
+    # a clean stop adds no fault; the earlier one stays until the next arm
+    assert again.faults == resumed.faults and again.run.armed
+
+
+def test_an_unreadable_state_file_is_set_aside(tmp_path: Path) -> None:
+    (tmp_path / "state.json").write_text("{not json")
+    path = OcuPath(router_config(tmp_path))
+    assert "unreadable" in path.faults[0] and not path.run.armed
+    assert (tmp_path / "state.json.unreadable").read_text() == "{not json"
