@@ -304,7 +304,7 @@ def supervise_runs() -> int:
     config: Config = current_app.config["CLOUDSIM"]
     now = utcnow()
     stopped = 0
-    for run in db.session.scalars(select(Run).where(Run.state == RunState.RUNNING)):
+    for run in db.session.scalars(select(Run).where(Run.state == RunState.RUNNING)).all():
         reason = run.stop_reason
         if reason is None and now >= run.task.window_stop:
             reason = "window"
@@ -326,7 +326,7 @@ def supervise_runs() -> int:
 def _retry_failed_stops() -> int:
     """Start the stop job again for runs left `stopping` by a stop job that failed."""
     retried = 0
-    for run in db.session.scalars(select(Run).where(Run.state == RunState.STOPPING)):
+    for run in db.session.scalars(select(Run).where(Run.state == RunState.STOPPING)).all():
         jobs = list(
             db.session.scalars(
                 select(Job)
