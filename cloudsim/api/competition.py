@@ -13,7 +13,6 @@ from cloudsim.api.common import SelectPage, caller
 from cloudsim.competition import runs as run_service
 from cloudsim.competition import schedule, season
 from cloudsim.competition.artifacts import LogStore
-from cloudsim.competition.views import log_of
 
 blp = Blueprint("api_competition", __name__, description="Tasks, runs, logs and scores")
 
@@ -218,7 +217,7 @@ class RunLog(MethodView):
     @blp.response(200, content_type="application/octet-stream")
     def get(self, run_id: int, artifact_id: int) -> Any:
         """Download one of the run's logs (streamed; the X-Checksum-SHA256 header to verify)."""
-        artifact = log_of(caller(), run_id, artifact_id)
+        artifact = run_service.get_log(caller(), run_id, artifact_id)
         store = LogStore(current_app.config["CLOUDSIM"])
         return Response(
             store.stream(artifact.location),

@@ -16,6 +16,7 @@ from cloudsim.errors import Conflict, Forbidden, NotFound
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import (
+    Artifact,
     Constellation,
     ConstellationState,
     Role,
@@ -150,6 +151,15 @@ def get_run(actor: User | None, run_id: int) -> Run:
         raise NotFound(f"run {run_id} not found")
     require_team_access(actor, run.team_id)
     return run
+
+
+def get_log(actor: User | None, run_id: int, artifact_id: int) -> Artifact:
+    """Return a stored log of a run the actor may see."""
+    run = get_run(actor, run_id)
+    artifact = db.session.get(Artifact, artifact_id)
+    if artifact is None or artifact.run_id != run.id:
+        raise NotFound(f"log {artifact_id} of run {run_id} not found")
+    return artifact
 
 
 def visible_runs(actor: User | None) -> Select[Run]:

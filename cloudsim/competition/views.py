@@ -25,9 +25,9 @@ from cloudsim.competition import schedule, season
 from cloudsim.competition.artifacts import LogStore
 from cloudsim.competition.forms import ImportForm, ScheduleForm
 from cloudsim.competition.plots import bandwidth_charts, read_bandwidth_log, score_chart
-from cloudsim.errors import CloudSimError, NotFound
+from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
-from cloudsim.models import Artifact, Role, Run, User
+from cloudsim.models import Role, Run, User
 from cloudsim.people.service import visible_teams
 
 bp = Blueprint("competition", __name__)
@@ -197,7 +197,7 @@ def stop(run_id: int) -> ResponseReturnValue:
 @bp.route("/runs/<int:run_id>/logs/<int:artifact_id>")
 @login_required
 def download(run_id: int, artifact_id: int) -> ResponseReturnValue:
-    artifact = log_of(current_user, run_id, artifact_id)
+    artifact = run_service.get_log(current_user, run_id, artifact_id)
     store = LogStore(current_app.config["CLOUDSIM"])
     return Response(
         store.stream(artifact.location),
@@ -208,15 +208,6 @@ def download(run_id: int, artifact_id: int) -> ResponseReturnValue:
             "X-Checksum-SHA256": artifact.sha256,
         },
     )
-
-
-def log_of(actor: User, run_id: int, artifact_id: int) -> Artifact:
-    """Return a stored log of a run the actor may see."""
-    run = run_service.get_run(actor, run_id)
-    artifact = db.session.get(Artifact, artifact_id)
-    if artifact is None or artifact.run_id != run.id:
-        raise NotFound(f"log {artifact_id} of run {run_id} not found")
-    return artifact
 
 
 @bp.route("/leaderboard")
