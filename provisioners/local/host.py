@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from provisioners.local import boot_scripts, processes
-from provisioners.local.commands import run_command
+from provisioners.local.commands import command_succeeds, run_command
 from provisioners.local.errors import CommandError, HostBootError, InvalidRequestError
 from provisioners.local.netns import can_connect, netns_path
 from provisioners.local.processes import ProcessId
@@ -23,6 +23,8 @@ INIT_MODES = (INIT_SYSTEMD, INIT_MINIMAL)
 SYSTEMD_BINARY = Path("/usr/lib/systemd/systemd")
 NSPAWN_PROPAGATE_DIR = Path("/run/systemd/nspawn/propagate")
 SSH_PORT = 22
+SSH_UNIT = "ssh.service"
+UNIT_CHECK_SECONDS = 1.0
 # Units the base image enables that a host still needs: its sshd.
 KEEP_ENABLED_UNITS = frozenset({"ssh.service", "sshd.service", "ssh.socket"})
 # nspawn would start a getty on its (passive) console: nobody logs in there.
@@ -214,12 +216,30 @@ def _wait_for_launcher(spec: HostSpec, deadline: float) -> ProcessId:
 def wait_for_sshd(spec: HostSpec, host: HostProcesses, timeout: float) -> None:
     """Poll until sshd accepts TCP connections inside the host; raise HostBootError if not."""
     deadline = time.monotonic() + timeout
+    next_unit_check = time.monotonic() + UNIT_CHECK_SECONDS
     while not can_connect(spec.netns, "127.0.0.1", SSH_PORT):
         if not processes.is_alive(host.init):
             raise HostBootError(f"host {spec.hostname}: init exited before sshd listened")
         if time.monotonic() >= deadline:
             raise HostBootError(f"host {spec.hostname}: sshd did not listen in {timeout:.0f} s")
+        if spec.init == INIT_SYSTEMD and time.monotonic() >= next_unit_check:
+            # systemd gives up on a unit that keeps failing: no point waiting for the deadline.
+            if _unit_failed(host.init, SSH_UNIT):
+                raise HostBootError(f"host {spec.hostname}: {SSH_UNIT} failed")
+            next_unit_check = time.monotonic() + UNIT_CHECK_SECONDS
         time.sleep(POLL_SECONDS)
+
+
+def _unit_failed(init: ProcessId, unit: str) -> bool:
+    """Say whether systemd inside the host has given up on unit (state "failed")."""
+    return command_succeeds(
+        [*_enter_host(init), "systemctl", "is-failed", "--quiet", unit], timeout=10
+    )
+
+
+def _enter_host(init: ProcessId) -> list[str]:
+    """Return the argv prefix that runs a command inside the host of this init."""
+    return ["nsenter", f"--target={init.pid}", "--mount", "--pid", "--uts", "--ipc", "--net"]
 
 
 def stop_host(launcher: ProcessId | None, init: ProcessId | None) -> None:
@@ -250,10 +270,7 @@ def systemd_journal_tail(init: ProcessId | None, lines: int = 30) -> str:
     """Return the end of a booting systemd host's journal, or why it could not be read."""
     if init is None or not processes.is_alive(init):
         return "(the host's init is not running)"
-    command = [
-        "nsenter", f"--target={init.pid}", "--mount", "--pid", "--uts", "--ipc", "--net",
-        "journalctl", "--boot", "--no-pager", f"--lines={lines}",
-    ]  # fmt: skip
+    command = [*_enter_host(init), "journalctl", "--boot", "--no-pager", f"--lines={lines}"]
     try:
         return run_command(command, timeout=10).rstrip()
     except CommandError as error:
