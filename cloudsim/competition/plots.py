@@ -145,9 +145,9 @@ def line_chart(
                 f'<polyline fill="none" stroke="{colour}" stroke-width="1.5" '
                 f'points="{path}" data-series="{escape(line.label)}"/>'
             )
-        parts.append(
-            f'<text x="{left + 8 + 150 * index}" y="{top + 10}" font-size="10" '
-            f'fill="{colour}">{escape(line.label)}</text>'
+        parts.append(  # the legend, right-aligned on the title's line
+            f'<text x="{width - right - 110 * (len(series) - 1 - index)}" y="16" '
+            f'text-anchor="end" font-size="11" fill="{colour}">{escape(line.label)}</text>'
         )
     parts.append("</svg>")
     return Markup("".join(parts))  # noqa: S704 - every text in it went through escape()

@@ -140,20 +140,24 @@ def run(run_id: int) -> ResponseReturnValue:
     return render_template(
         "competition/run.html",
         run=shown,
-        charts=_charts(shown),
+        score_plot=_score_plot(shown),
+        bandwidth_plots=_bandwidth_plots(shown),
         bits_left=_bits_left(shown),
         confirm=ConfirmForm(),
     )
 
 
-def _charts(run: Run) -> list[Any]:
+def _score_plot(run: Run) -> Any:
     events = [(e.sim_time, e.kind, _score_after(run, e.sim_time)) for e in run.score_events]
-    charts = [score_chart(events, run.sim_seconds)]
+    return score_chart(events, run.sim_seconds)
+
+
+def _bandwidth_plots(run: Run) -> list[Any]:
     bandwidth = next((a for a in run.artifacts if a.filename == "bandwidth.jsonl"), None)
-    if bandwidth is not None:
-        store = LogStore(current_app.config["CLOUDSIM"])
-        charts += bandwidth_charts(read_bandwidth_log(store.lines(bandwidth.location)))
-    return charts
+    if bandwidth is None:
+        return []
+    store = LogStore(current_app.config["CLOUDSIM"])
+    return bandwidth_charts(read_bandwidth_log(store.lines(bandwidth.location)))
 
 
 def _score_after(run: Run, sim_time: float) -> int:
