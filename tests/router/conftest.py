@@ -264,6 +264,7 @@ def _build_lab(driver: LocalNodeDriver, executor: SSHExecutor, scratch: Path) ->
         "server": pki.issue_server(ca, VPN_SERVER_NAME),
         "ocu": pki.issue_client(ca, "operator@team.example"),
         "spare": pki.issue_client(ca, "spare@team.example"),
+        "departed": pki.issue_client(ca, "departed@team.example"),
     }
     for name in ("router", "sim"):
         apply_plan(executor, targets[name], firewall(context(name)))

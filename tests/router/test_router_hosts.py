@@ -161,10 +161,20 @@ def test_without_the_daemon_ocu_traffic_stops_and_status_says_so(lab: RouterLab)
     assert lab.csrouter("status")["healthy"]
 
 
+def test_revoking_someone_else_only_briefly_interrupts_a_connected_client(
+    lab: RouterLab,
+) -> None:
+    lab.csrouter("arm", "--latency-ms", "0", "--run-id", "revoke-other")
+    departed = lab.clients["departed"].serial
+    assert lab.apply_router(lab.vpn_material(revoked=[departed])) > 0
+    # the server restarted; the client is told so and reconnects at once
+    wait_for(lambda: lab.ping("ocu", lab.ip("sim")).ok, 20, "the OCU to reconnect")
+
+
 def test_a_revoked_client_cannot_connect(lab: RouterLab) -> None:
     lab.csrouter("arm", "--latency-ms", "0", "--run-id", "revoke")
     revoked = lab.clients["ocu"].serial
-    assert lab.apply_router(lab.vpn_material(revoked=[revoked])) > 0
+    assert lab.apply_router(lab.vpn_material(revoked=[revoked, lab.clients["departed"].serial])) > 0
     journal = "journalctl -u openvpn-server@cloudsim --no-pager -o cat"
     wait_for(
         lambda: "certificate revoked" in lab.run("router", journal), 30, "the server to refuse"

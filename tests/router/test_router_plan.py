@@ -84,3 +84,19 @@ def test_the_client_template_inlines_the_bundle(material: VpnMaterial) -> None:
     )
     assert "remote 198.51.100.7 1194\n" in text and "<key>\nKEY\n</key>" in text
     assert "verify-x509-name cloudsim-router name" in text and "remote-cert-tls server" in text
+
+
+def test_the_bundle_readme_lists_the_lan_machines() -> None:
+    text = MachineTemplates().render(
+        "router/vpn-bundle-README.txt.j2",
+        {
+            "user": "operator@team.example",
+            "constellation": "alpha",
+            "file_name": "alpha.ovpn",
+            "remote_host": "198.51.100.7",
+            "remote_port": 1194,
+            "lan_addresses": {"sim": "10.0.0.51", "fc1": "10.0.0.52"},
+        },
+    )
+    assert "sudo openvpn --config alpha.ovpn" in text
+    assert "    sim      10.0.0.51\n    fc1      10.0.0.52\n" in text
