@@ -36,6 +36,7 @@ from cloudsim.fleet.connect import MachineHostKeys, targets
 from cloudsim.fleet.keys import constellation_keypair
 from cloudsim.fleet.providers import open_provider
 from cloudsim.jobs.runner import JobContext, job_kind
+from cloudsim.jobs.service import enqueue
 from cloudsim.models import Job, JobState, Run, RunState, ScoreEvent, utcnow
 from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
 from provisioners.ssh import Machine as Target
@@ -200,8 +201,6 @@ def _start_simulator(reach: Machines, run: Run) -> None:
 
 
 def _enqueue_stop(run: Run) -> None:
-    from cloudsim.jobs.service import enqueue
-
     enqueue("run.stop", None, target_type="run", target_id=run.id, team_id=run.team_id)
 
 
