@@ -161,6 +161,16 @@ def test_without_the_daemon_ocu_traffic_stops_and_status_says_so(lab: RouterLab)
     assert lab.csrouter("status")["healthy"]
 
 
+def test_missing_queue_rules_are_a_fault_that_a_restart_repairs(lab: RouterLab) -> None:
+    lab.run("router", "iptables -w 10 -t raw -D PREROUTING -j CLOUDSIM-OCU")
+    unhealthy = lab.result("router", "csrouter status --json")
+    assert unhealthy.exit_code == 4
+    assert "NFQUEUE rules missing" in json.loads(unhealthy.stdout)["faults"][0]
+    lab.run("router", "systemctl restart csrouter")
+    assert lab.csrouter("status")["healthy"]
+    assert lab.result("router", "iptables -w 10 -t raw -C PREROUTING -j CLOUDSIM-OCU").ok
+
+
 def test_revoking_someone_else_only_briefly_interrupts_a_connected_client(
     lab: RouterLab,
 ) -> None:
