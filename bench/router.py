@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import statistics
 import sys
 import tempfile
@@ -118,12 +117,7 @@ def main() -> None:
             print(measure(lab, mbit, args.seconds, base_ms), flush=True)
         print(f"load average now: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     finally:
-        executor.close()
-        for node in driver.list_nodes():
-            driver.destroy_node(node)
-        for network in driver.ex_list_networks():
-            driver.ex_destroy_network(network)
-        shutil.rmtree(scratch)
+        lab_support.tear_down(driver, executor, scratch)
 
 
 if __name__ == "__main__":

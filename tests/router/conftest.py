@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shlex
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -205,12 +207,33 @@ def lab() -> Iterator[RouterLab]:
     try:
         yield _build_lab(driver, executor, scratch)
     finally:
-        executor.close()
-        for node in driver.list_nodes():
-            driver.destroy_node(node)
-        for network in driver.ex_list_networks():
-            driver.ex_destroy_network(network)
-        shutil.rmtree(scratch)
+        tear_down(driver, executor, scratch)
+    left = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
+    assert PREFIX not in left, f"namespaces left behind: {left}"
+
+
+def tear_down(driver: LocalNodeDriver, executor: SSHExecutor, scratch: Path) -> None:
+    """Close the connections, destroy every host and network, remove the scratch folder.
+
+    Every step is tried even when an earlier one fails (a broken SSH proxy must not leak
+    hosts); the first failure is raised at the end.
+    """
+    failures: list[Exception] = []
+
+    def attempt(action: Callable[[], object]) -> None:
+        try:
+            action()
+        except Exception as exc:  # collected and raised below, after the other steps
+            failures.append(exc)
+
+    attempt(executor.close)
+    for node in driver.list_nodes():
+        attempt(functools.partial(driver.destroy_node, node))
+    for network in driver.ex_list_networks():
+        attempt(functools.partial(driver.ex_destroy_network, network))
+    attempt(lambda: shutil.rmtree(scratch))
+    if failures:
+        raise failures[0]
 
 
 def _build_lab(driver: LocalNodeDriver, executor: SSHExecutor, scratch: Path) -> RouterLab:
