@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 from csrouter.bandwidth_log import BandwidthLog
 from csrouter.config import RouterConfig, check_cap, check_latency, load_config
-from csrouter.errors import ConfigError
+from csrouter.control import ControlServer, request
+from csrouter.errors import ConfigError, ControlError, DaemonUnavailable
 from csrouter.ocu_path import OcuPath
 from csrouter.packets import PacketSize
 from csrouter.run import Run, SavedState
@@ -122,3 +124,24 @@ def test_an_unreadable_state_file_is_set_aside(tmp_path: Path) -> None:
     path = OcuPath(router_config(tmp_path))
     assert "unreadable" in path.faults[0] and not path.run.armed
     assert (tmp_path / "state.json.unreadable").read_text() == "{not json"
+
+
+def test_the_control_socket_answers_and_reports_errors(tmp_path: Path) -> None:
+    def handle(message: dict[str, Any]) -> dict[str, Any]:
+        if message["op"] == "boom":
+            raise ConfigError("refused")
+        return {"echo": message["op"]}
+
+    socket_path = tmp_path / "run" / "control.sock"
+    server = ControlServer(str(socket_path), handle)
+    server.start()
+    try:
+        assert request(str(socket_path), {"op": "status"}) == {"echo": "status"}
+        with pytest.raises(ControlError, match="refused"):
+            request(str(socket_path), {"op": "boom"})
+        assert oct(socket_path.stat().st_mode & 0o777) == "0o600"
+        assert oct(socket_path.parent.stat().st_mode & 0o777) == "0o700"
+    finally:
+        server.close()
+    with pytest.raises(DaemonUnavailable, match="does not answer"):
+        request(str(socket_path), {"op": "status"})
