@@ -52,6 +52,7 @@ class OcuPath:
         self.faults: list[str] = []
         self.run = Run(latency_ms=config.default_latency_ms)
         self._resume(self._read_state())
+        self._second = 1  # the next second of the run to log (it ends `_second` s after the arm)
         self._next_tick = self._first_tick()
         # from now on a crash, however early, shows as an unclean exit at the next start
         self._save(clean_exit=False)
@@ -109,7 +110,7 @@ class OcuPath:
             self.run, self.faults, self.last_run = run, [], None
             for line in self.lines.values():
                 line.lateness = Lateness()
-            self._next_tick = self._monotonic() + 1.0
+            self._second, self._next_tick = 1, self._monotonic() + 1.0
             self.log.restart()
             self.log.append([self._event("armed")])
             self._save(clean_exit=False)
@@ -211,21 +212,25 @@ class OcuPath:
         if not self.run.armed or self.run.armed_at is None:
             return self._monotonic() + 1.0
         # keep the log's seconds counted from the arm
-        since_arm = self._wall() - self.run.armed_at
-        return self._monotonic() + (1.0 - since_arm % 1.0)
+        since_arm = max(0.0, self._wall() - self.run.armed_at)
+        self._second = int(since_arm) + 1
+        return self._monotonic() + (self._second - since_arm)
 
     def _tick(self, now: float) -> None:
         """Write one line per direction for every whole second that has passed."""
         records: list[dict[str, Any]] = []
-        wall = self._wall()
+        armed_at = self.run.armed_at or self._wall()
         while now >= self._next_tick:
             self._next_tick += 1.0
+            second, self._second = self._second, self._second + 1
             for direction in DIRECTIONS:
                 meter = self.run.meters[direction]
                 accepted, dropped = meter.take_second()
                 records.append(
                     {
-                        "time": utc_iso(wall),
+                        # the end of the second the line covers, not when it was written
+                        "time": utc_iso(armed_at + second),
+                        "second": second,
                         "run_id": self.run.run_id,
                         "direction": direction,
                         "bytes": accepted.payload_bytes,

@@ -102,6 +102,9 @@ def test_an_armed_run_logs_every_whole_second_and_its_end(tmp_path: Path) -> Non
         "armed", *["uplink", "downlink"] * 3, "disarmed"
     ]  # fmt: skip
     assert records[1]["cap_remaining_bits"] == 8000 and final["elapsed_s"] == 3.5
+    # written late (all three at once) but stamped with the second each covers
+    assert [r["second"] for r in records[1:-1:2]] == [1, 2, 3]
+    assert [r["time"][17:23] for r in records[1:-1:2]] == ["41.000", "42.000", "43.000"]
     assert path.counters()["last_run"] == final and not path.counters()["armed"]
 
 
