@@ -16,6 +16,8 @@ from provisioners.ssh.hostkeys import HostKeyStore, TrustOnFirstUse
 from provisioners.ssh.machine import Machine, load_private_key
 from provisioners.ssh.proxy import ArgvProxyCommand
 
+# how long to wait for paramiko's reader thread to stop after a connection is closed
+_READER_STOP_SECONDS = 5.0
 # what a machine that is still booting (or a proxy/jump path not yet ready) looks like
 _RETRYABLE = (OSError, EOFError, paramiko.SSHException)
 
@@ -92,8 +94,14 @@ class ConnectionPool:
 
     def _drop(self, name: str) -> None:
         cached = self._connections.pop(name, None)
-        if cached is not None:
-            cached[1].close()
+        if cached is None:
+            return
+        transport = cached[1].client.get_transport()
+        cached[1].close()
+        if transport is not None:
+            transport.join(_READER_STOP_SECONDS)  # the reader thread must be done with the proxy
+            if isinstance(transport.sock, ArgvProxyCommand):
+                transport.sock.release()
 
     def _connect_with_retries(self, machine: Machine) -> fabric.Connection:
         deadline = time.monotonic() + self._policy.deadline
@@ -145,9 +153,14 @@ class ConnectionPool:
             connection.open()
         except BaseException:
             # fabric's close() skips a transport that died mid-handshake; its socket must go too
+            transport = connection.client.get_transport()
             connection.client.close()
+            if transport is not None:
+                transport.join(_READER_STOP_SECONDS)
             if sock is not None:
                 sock.close()
+                if isinstance(sock, ArgvProxyCommand):
+                    sock.release()
             raise
         transport = connection.client.get_transport()
         if transport is not None:

@@ -53,7 +53,12 @@ class ArgvProxyCommand(paramiko.ProxyCommand):
         return data
 
     def close(self) -> None:
-        """Stop the proxy process and reap it."""
+        """Stop the proxy process and reap it; the pipes stay open until release().
+
+        paramiko's reader thread may still be inside recv(): with the process gone it reads
+        end-of-stream and exits. Closing the pipes now could let a new connection reuse the
+        descriptor under that thread's feet.
+        """
         if self.process.returncode is None:
             self.process.terminate()
             try:
@@ -61,6 +66,9 @@ class ArgvProxyCommand(paramiko.ProxyCommand):
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
+
+    def release(self) -> None:
+        """Close the pipes, once the transport that read them has stopped."""
         for pipe in (self.process.stdin, self.process.stdout):
             if pipe is not None:
                 pipe.close()

@@ -45,10 +45,7 @@ def fleet_app(fleet_config: Config) -> Iterator[Flask]:
 def destroy_everything(config: Config) -> None:
     """Remove every host and network a test made, even when it failed half-way."""
     driver = open_provider("local", config).driver
-    for node in driver.list_nodes():
-        driver.destroy_node(node)
-    for network in driver.ex_list_networks():
-        driver.ex_destroy_network(network)
+    driver.ex_sweep()  # type: ignore[attr-defined]
 
 
 @pytest.fixture
