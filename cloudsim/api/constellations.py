@@ -9,8 +9,14 @@ from flask.views import MethodView
 from flask_smorest import Blueprint
 
 from cloudsim.api.common import SelectPage, caller
-from cloudsim.api.schemas import ConstellationSchema, JobSchema, LaunchedSchema, LaunchSchema
-from cloudsim.fleet import service
+from cloudsim.api.schemas import (
+    ConstellationSchema,
+    JobSchema,
+    LaunchedSchema,
+    LaunchSchema,
+    VpnBundleQuerySchema,
+)
+from cloudsim.fleet import service, vpn
 
 blp = Blueprint("api_constellations", __name__, description="Constellations and machines")
 
@@ -58,6 +64,24 @@ class SshBundle(MethodView):
     def get(self, ref: int) -> Any:
         """Download the constellation's SSH key bundle (officers and admins)."""
         filename, data = service.ssh_bundle(caller(), ref)
+        return Response(
+            data,
+            mimetype="application/zip",
+            headers={
+                "Content-Disposition": f'attachment; filename="{filename}"',
+                "Cache-Control": "no-store",
+            },
+        )
+
+
+@blp.route("/constellations/<int:ref>/vpn-bundle")
+class VpnBundle(MethodView):
+    @blp.arguments(VpnBundleQuerySchema, location="query")
+    @blp.response(200, content_type="application/zip")
+    def get(self, query: dict[str, Any], ref: int) -> Any:
+        """Download a team user's VPN bundle: the caller's own, or (officers) user_id's."""
+        constellation = service.get_constellation(caller(), ref)
+        filename, data = vpn.vpn_bundle(caller(), constellation, query.get("user_id"))
         return Response(
             data,
             mimetype="application/zip",

@@ -129,3 +129,7 @@ class LaunchSchema(Schema):
 class LaunchedSchema(Schema):
     constellation = fields.Nested(ConstellationSchema)
     job = fields.Nested(JobSchema)
+
+
+class VpnBundleQuerySchema(Schema):
+    user_id = fields.Int(metadata={"description": "Officers: whose bundle (default: yours)"})

@@ -24,10 +24,12 @@ from cloudsim.fleet.connect import MachineHostKeys, targets
 from cloudsim.fleet.keys import KeyPair, constellation_keypair, instance_admin_password
 from cloudsim.fleet.providers import NetworkDriver, Provider, open_provider
 from cloudsim.fleet.verify import verify_constellation
+from cloudsim.fleet.vpn import server_material
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.models import Constellation, ConstellationState, MachineState, Secret
 from constellations.definition import ConstellationKind, load_kind
 from constellations.plans import PLANS, Action, PlanContext, PlanItem, firewall
+from constellations.plans.router import router_source
 from constellations.plans.software import build_source_bundle, build_wheelhouse
 from provisioners.operations import apply
 from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
@@ -105,21 +107,7 @@ def _launch(
             )
         _deploy(ctx, executor, reach, {n: firewall(c) for n, c in contexts.items()})
         ctx.stage("install", 50)
-        cache = config.instance_dir / "wheelhouse"
-        if any(set(m.plan) & NEEDS_WHEELHOUSE for m in kind.machines):
-            ctx.log("building the simulator's wheelhouse (cached after the first time)")
-            wheelhouse = build_wheelhouse(SIMULATOR_SOURCE, cache, config.machine_python)
-            contexts = {n: replace(c, wheelhouse=wheelhouse) for n, c in contexts.items()}
-        if any("cloudsim_server" in m.plan for m in kind.machines):
-            ctx.log("bundling CloudSim's source and wheels (cached after the first time)")
-            password = instance_admin_password(constellation)
-            ctx.mask(password)
-            executor.add_secret(password)
-            bundle = build_source_bundle(PROJECT_ROOT, cache, config.machine_python)
-            contexts = {
-                n: replace(c, app_bundle=bundle, secrets={"cloudsim_admin_password": password})
-                for n, c in contexts.items()
-            }
+        contexts = _with_software(ctx, executor, constellation, kind, contexts, config)
         plans = {
             n: [item for plan in c.machine.plan for item in PLANS[plan](c)]
             for n, c in contexts.items()
@@ -127,6 +115,73 @@ def _launch(
         _deploy(ctx, executor, reach, plans)
         ctx.stage("verify", 80)
         verify_constellation(ctx, executor, constellation, kind, reach, provider.public_probe)
+
+
+def _with_software(
+    ctx: JobContext,
+    executor: SSHExecutor,
+    constellation: Constellation,
+    kind: ConstellationKind,
+    contexts: dict[str, PlanContext],
+    config: Config,
+) -> dict[str, PlanContext]:
+    """Add to the plan contexts what the plans install: wheelhouses, bundles, VPN keys."""
+    cache = config.instance_dir / "wheelhouse"
+    used = {plan for machine in kind.machines for plan in machine.plan}
+    if used & NEEDS_WHEELHOUSE:
+        ctx.log("building the simulator's wheelhouse (cached after the first time)")
+        wheelhouse = build_wheelhouse(SIMULATOR_SOURCE, cache, config.machine_python)
+        contexts = {n: replace(c, wheelhouse=wheelhouse) for n, c in contexts.items()}
+    if "cloudsim_server" in used:
+        ctx.log("bundling CloudSim's source and wheels (cached after the first time)")
+        password = instance_admin_password(constellation)
+        ctx.mask(password)
+        executor.add_secret(password)
+        bundle = build_source_bundle(PROJECT_ROOT, cache, config.machine_python)
+        secrets = {"cloudsim_admin_password": password}
+        contexts = {n: replace(c, app_bundle=bundle, secrets=secrets) for n, c in contexts.items()}
+    if "router" in used:
+        ctx.log("building the router's wheelhouse and the team VPN's keys")
+        material = server_material(constellation)
+        ctx.mask(material.server_key)
+        executor.add_secret(material.server_key)
+        router_wheels = build_wheelhouse(router_source(), cache, config.machine_python)
+        contexts = {
+            n: replace(c, vpn=material, router_wheelhouse=router_wheels)
+            if "router" in c.machine.plan
+            else c
+            for n, c in contexts.items()
+        }
+    return contexts
+
+
+@job_kind("constellation.refresh_vpn")
+def refresh_vpn(ctx: JobContext) -> None:
+    """Push the VPN's current keys and revocation list to the router (after a revocation)."""
+    constellation = _constellation(ctx)
+    if constellation.state != ConstellationState.READY:
+        ctx.log(
+            f"{constellation.name} is {constellation.state.value}: its next launch "
+            "applies the current revocation list"
+        )
+        return
+    config: Config = current_app.config["CLOUDSIM"]
+    kind = load_kind(constellation.kind, set(PLANS))
+    routers = [m for m in kind.machines if "router" in m.plan]
+    keys = constellation_keypair(constellation)
+    provider = open_provider(constellation.provider, config)
+    subnet = constellation.resources["subnet"]
+    with SSHExecutor(
+        MachineHostKeys(constellation), log_sink=ctx.line_sink(), secrets=[keys.private]
+    ) as executor:
+        reach = targets(constellation, provider.nodes(constellation.name), keys)
+        contexts = {
+            m.name: _plan_context(constellation, kind, m.name, subnet, config) for m in routers
+        }
+        ctx.stage("vpn", 30)
+        contexts = _with_software(ctx, executor, constellation, kind, contexts, config)
+        plans = {n: PLANS["router"](c) for n, c in contexts.items()}
+        _deploy(ctx, executor, {n: reach[n] for n in plans}, plans)
 
 
 def _network(driver: NetworkDriver, constellation: Constellation) -> Any:

@@ -13,12 +13,13 @@ from pathlib import Path
 from typing import Any
 
 from cloudsim.errors import CloudSimError
+from constellations.plans.router import CSROUTER_COMMAND
 from provisioners.ssh import Machine as Target
 from provisioners.ssh import SSHError, SSHExecutor
 
-CSROUTER = "/opt/csrouter/bin/csrouter"
 BANDWIDTH_LOG = "/var/log/cloudsim/bandwidth.log"
 CONTROL_TIMEOUT = 30
+DAEMON_DOWN, FAULTS = 3, 4  # csrouter's exit codes (router/README.md)
 
 
 class RouterError(CloudSimError):
@@ -41,7 +42,7 @@ class Limits:
 
 
 def _csrouter(executor: SSHExecutor, router: Target, *args: str) -> str:
-    command = " ".join([CSROUTER, *map(shlex.quote, args)])
+    command = " ".join([CSROUTER_COMMAND, *map(shlex.quote, args)])
     try:
         return executor.run(router, command, timeout=CONTROL_TIMEOUT).stdout
     except SSHError as exc:
@@ -75,10 +76,18 @@ def counters(executor: SSHExecutor, router: Target) -> dict[str, Any]:
 
 
 def status(executor: SSHExecutor, router: Target) -> dict[str, Any]:
-    """Return the daemon's status; raises RouterError when it is not running (a fault)."""
-    output = _csrouter(executor, router, "status", "--json")
+    """Return the daemon's status (with its faults, if any); RouterError when it is down."""
+    command = f"{CSROUTER_COMMAND} status --json"
     try:
-        return dict(json.loads(output))
+        result = executor.run(router, command, timeout=CONTROL_TIMEOUT, check=False)
+    except SSHError as exc:
+        raise RouterError(f"router: status failed: {exc}") from exc
+    if result.exit_code == DAEMON_DOWN:
+        raise RouterError(f"router: csrouter is down: {result.stdout.strip()}")
+    if result.exit_code not in (0, FAULTS):
+        raise RouterError(f"router: status failed (exit {result.exit_code}): {result.stderr}")
+    try:
+        return dict(json.loads(result.stdout))
     except ValueError as exc:
         raise RouterError(f"router: status printed something else than JSON: {exc}") from exc
 

@@ -2,7 +2,16 @@
 
 from __future__ import annotations
 
-from flask import Blueprint, Response, flash, jsonify, redirect, render_template, url_for
+from flask import (
+    Blueprint,
+    Response,
+    flash,
+    jsonify,
+    redirect,
+    render_template,
+    request,
+    url_for,
+)
 from flask.typing import ResponseReturnValue
 from flask_login import current_user, login_required
 
@@ -10,7 +19,7 @@ from cloudsim.auth.forms import ConfirmForm
 from cloudsim.auth.policy import role_required
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
-from cloudsim.fleet import service
+from cloudsim.fleet import service, vpn
 from cloudsim.fleet.forms import LaunchForm
 from cloudsim.jobs.views import job_summary
 from cloudsim.models import Role
@@ -111,6 +120,23 @@ def retry(ref: int) -> ResponseReturnValue:
 @role_required(Role.OFFICER)
 def ssh_bundle(ref: int) -> ResponseReturnValue:
     filename, data = service.ssh_bundle(current_user, ref)
+    return Response(
+        data,
+        mimetype="application/zip",
+        headers={
+            "Content-Disposition": f'attachment; filename="{filename}"',
+            "Cache-Control": "no-store",
+        },
+    )
+
+
+@bp.route("/constellations/<int:ref>/vpn-bundle")
+@login_required
+def vpn_bundle(ref: int) -> ResponseReturnValue:
+    """Download a team user's VPN bundle: one's own, or (officers) ?user_id=N's."""
+    constellation = service.get_constellation(current_user, ref)
+    user_id = request.args.get("user_id", type=int)
+    filename, data = vpn.vpn_bundle(current_user, constellation, user_id)
     return Response(
         data,
         mimetype="application/zip",

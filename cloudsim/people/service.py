@@ -14,6 +14,7 @@ from cloudsim.auth.passwords import generate_password, hash_password
 from cloudsim.auth.policy import require_role, require_team_access
 from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
 from cloudsim.extensions import db
+from cloudsim.fleet.vpn import revoke_and_push
 from cloudsim.models import ConstellationState, Role, Team, User
 
 TEAM_NAME_MAX = 80
@@ -241,6 +242,7 @@ def update_user(
     new_role = parse_role(role) if role is not None else user.role
     _check_manage(actor, new_role)
     changes: dict[str, object] = {}
+    old_team = user.team_id
     if actor is not None and actor.id == user.id and (new_role != user.role or active is False):
         raise Forbidden("you cannot change your own role or disable yourself")
     if new_role != user.role and user.role == Role.ADMIN:
@@ -252,6 +254,7 @@ def update_user(
         user.team_id = _team_for_role(new_role, wanted_team)
         user.role = new_role
         changes.update(role=new_role.value, team_id=user.team_id)
+    leaving_team = user.team_id != old_team or (active is False and user.active)
     if name is not None:
         user.name = name.strip()[:120]
         changes["name"] = user.name
@@ -269,6 +272,8 @@ def update_user(
         "user.update", actor, target_type="user", target_id=user.id, team_id=user.team_id, **changes
     )
     db.session.commit()
+    if leaving_team:
+        revoke_and_push(user)  # they leave the team's VPN at once
     return user
 
 
@@ -280,6 +285,7 @@ def delete_user(actor: User | None, user_id: int) -> None:
         raise Forbidden("you cannot delete your own account")
     if user.role == Role.ADMIN:
         _ensure_another_admin(user)
+    revoke_and_push(user)
     record(
         "user.delete",
         actor,
