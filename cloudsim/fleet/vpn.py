@@ -24,18 +24,6 @@ CA = "vpn-ca"
 SERVER = "vpn-server"
 REVOKED = "vpn-revoked"
 CLIENT_PREFIX = "vpn-client:"
-BUNDLE_README = """CloudSim VPN for {user} on constellation {constellation}
-
-Connect your operator station (OCU) to your team's machines:
-
-    sudo openvpn --config {file_name}
-
-(Debian/Ubuntu: apt install openvpn.) Once connected you reach the LAN of the
-constellation: sim {sim}, fc1 {fc1}, fc2 {fc2}. All traffic through the VPN is delayed,
-counted and capped during runs, the same for every team.
-This file holds your private key: keep it to yourself. It stops working when your account is
-removed from the team.
-"""
 
 
 def _pem_pair(constellation: Constellation, name: str, make: Any) -> dict[str, Any]:
@@ -167,28 +155,32 @@ def vpn_bundle(
     ca_cert = _ca(constellation).cert_pem
     client = client_certificate(constellation, user)
     file_name = f"{constellation.name}-{user.email.split('@')[0]}.ovpn"
-    config = MachineTemplates().render(
+    templates = MachineTemplates()
+    common = {
+        "user": user.email,
+        "constellation": constellation.name,
+        "file_name": file_name,
+        "remote_host": router.public_ip,
+        "remote_port": VpnMaterial.port,
+    }
+    config = templates.render(
         "router/client.ovpn.j2",
         {
-            "user": user.email,
-            "constellation": constellation.name,
-            "file_name": file_name,
-            "remote_host": router.public_ip,
-            "remote_port": VpnMaterial.port,
+            **common,
             "server_name": VPN_SERVER_NAME,
             "ca_cert": ca_cert,
             "client_cert": client["cert"],
             "client_key": client["key"],
         },
     )
-    lan = {m.name: m.private_ip or "?" for m in constellation.machines}
-    readme = BUNDLE_README.format(
-        user=user.email,
-        constellation=constellation.name,
-        file_name=file_name,
-        sim=lan.get("sim", "?"),
-        fc1=lan.get("fc1", "?"),
-        fc2=lan.get("fc2", "?"),
+    readme = templates.render(
+        "router/vpn-bundle-README.txt.j2",
+        {
+            **common,
+            "lan_addresses": {
+                m.name: m.private_ip or "?" for m in constellation.machines if m.role != "router"
+            },
+        },
     )
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as bundle:
