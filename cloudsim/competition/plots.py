@@ -47,9 +47,12 @@ def read_bandwidth_log(lines: Iterable[str]) -> dict[str, Bandwidth]:
         direction = record.get("direction")
         if direction not in result or "bytes" not in record:
             continue
-        moment = datetime.fromisoformat(record["time"])
-        start = start or moment
-        second = max(0, round((moment - start).total_seconds()) - 1)
+        if "second" in record:  # line N covers N-1..N s after the arm
+            second = max(0, int(record["second"]) - 1)
+        else:
+            moment = datetime.fromisoformat(record["time"])
+            start = start or moment
+            second = max(0, round((moment - start).total_seconds()) - 1)
         series = result[direction]
         series.bits_per_second.extend([0] * (second + 1 - len(series.bits_per_second)))
         series.bits_per_second[second] += 8 * int(record["bytes"])

@@ -132,3 +132,24 @@ def test_chart_text_is_escaped() -> None:
     hostile = line_chart("<b>x</b>", [Series("<script>", [(0, 0), (1, 1)])], x_label="", y_label="")
     assert "<script>" not in hostile and "&lt;script&gt;" in hostile
     assert chart.count("<svg") == 1
+
+
+def test_bandwidth_lines_go_to_the_second_they_cover_even_when_written_late() -> None:
+    lines = [
+        json.dumps({"event": "armed", "time": "2026-06-17T16:00:00.000+00:00"}),
+        *(
+            json.dumps(
+                {
+                    "time": "2026-06-17T16:00:09.000+00:00",  # a restart wrote three at once
+                    "second": second,
+                    "direction": "uplink",
+                    "bytes": 100 * second,
+                    "cumulative_bytes": sum(100 * s for s in range(1, second + 1)),
+                }
+            )
+            for second in (1, 2, 3)
+        ),
+    ]
+    usage = read_bandwidth_log(lines)
+    assert usage["uplink"].bits_per_second == [800, 1600, 2400]
+    assert usage["uplink"].used_bits == 4800
