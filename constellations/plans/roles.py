@@ -13,6 +13,7 @@ from provisioners.ssh import Machine as Target
 from provisioners.ssh import SSHExecutor
 
 SIMULATOR_VENV = "/opt/drcsim"
+CLIENT_ONLY = ("drcsim", "pyzmq", "msgpack")
 CLOUDSIM_ROOT = "/opt/cloudsim/src"
 CLOUDSIM_VENV = "/opt/cloudsim/venv"
 CLOUDSIM_ENV = "/etc/cloudsim/cloudsim.env"
@@ -27,8 +28,9 @@ def simulator(ctx: PlanContext) -> list[PlanItem]:
 
 
 def field_computer(ctx: PlanContext) -> list[PlanItem]:
-    """Install drcsim for its client library, which team code uses to drive the robot."""
-    return [install_wheelhouse(_wheelhouse(ctx), SIMULATOR_VENV, "drcsim")]
+    """Install drcsim's client library (and example controller), which team code drives the
+    robot with: without the physics engine, which only sim needs."""
+    return [install_wheelhouse(_wheelhouse(ctx), SIMULATOR_VENV, "drcsim", only=CLIENT_ONLY)]
 
 
 def cloudsim_server(ctx: PlanContext) -> list[PlanItem]:

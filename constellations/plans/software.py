@@ -8,6 +8,7 @@ import shutil
 import subprocess
 import tarfile
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 from constellations.plans.base import Action
@@ -78,14 +79,21 @@ def _sums(text: str) -> dict[str, str]:
     return {name: digest for digest, name in pairs}
 
 
-def _offline_install(folder: Path, venv: str, description: str, install: str) -> Action:
+def _offline_install(
+    folder: Path, venv: str, description: str, install: str, only: set[str] | None = None
+) -> Action:
     """Upload the files of `folder` the machine lacks, then run `install` once (marked in venv).
 
-    In `install`, {remote} is the folder's path on the machine.
+    In `install`, {remote} is the folder's path on the machine. `only` limits the upload to
+    the wheels of these distributions.
     """
     remote = f"{REMOTE_ROOT}/{folder.name}"
     marker = f"{venv}/.cloudsim-installed-{folder.name}"
-    wanted = _sums((folder / SUMS).read_text())
+    wanted = {
+        name: digest
+        for name, digest in _sums((folder / SUMS).read_text()).items()
+        if only is None or _distribution(name) in only
+    }
 
     def run(executor: SSHExecutor, target: Target) -> bool:
         if executor.run(target, f"test -e {shlex.quote(marker)}", check=False).ok:
@@ -103,15 +111,29 @@ def _offline_install(folder: Path, venv: str, description: str, install: str) ->
     return Action(description, run)
 
 
-def install_wheelhouse(wheelhouse: Path, venv: str, requirement: str) -> Action:
-    """Upload the wheels the machine lacks and install `requirement` into `venv`, offline."""
+def _distribution(wheel: str) -> str:
+    """Return the normalised distribution name of a wheel file name."""
+    return wheel.split("-", 1)[0].lower().replace("_", "-")
+
+
+def install_wheelhouse(
+    wheelhouse: Path, venv: str, requirement: str, *, only: Sequence[str] = ()
+) -> Action:
+    """Upload the wheels the machine lacks and install `requirement` into `venv`, offline.
+
+    With `only`, just those distributions are uploaded and installed, without their
+    dependencies (e.g. a client library that needs few of the package's dependencies).
+    """
     q_venv = shlex.quote(venv)
+    packages = " ".join(shlex.quote(p) for p in (only or [requirement]))
+    no_deps = " --no-deps" if only else ""
     return _offline_install(
         wheelhouse,
         venv,
         f"install {requirement} from {wheelhouse.name} into {venv}",
-        f"python3 -m venv {q_venv} && {q_venv}/bin/pip install --quiet --no-index "
-        f"--find-links {{remote}} {shlex.quote(requirement)}",
+        f"python3 -m venv {q_venv} && {q_venv}/bin/pip install --quiet --no-index{no_deps} "
+        f"--find-links {{remote}} {packages}",
+        only={p.lower() for p in only} or None,
     )
 
 

@@ -10,11 +10,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drcsim.client import SimClient
 from drcsim.errors import ClientError
-from drcsim.local import LocalClient
+
+if TYPE_CHECKING:
+    from drcsim.local import LocalClient
 
 Log = Callable[[str], None]
 
