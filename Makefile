@@ -22,6 +22,7 @@ bench: install
 	$(BIN)/python bench/web.py
 	$(BIN)/python bench/provision.py
 	$(BIN)/python bench/local_hosts.py
+	$(BIN)/python bench/router.py
 	$(BIN)/drcsim bench
 
 clean:
