@@ -7,7 +7,7 @@ from __future__ import annotations
 import hashlib
 import shlex
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from datetime import timedelta
 from pathlib import Path
 
@@ -72,8 +72,12 @@ def _local(minutes: int) -> str:
     return in_zone(utcnow() + timedelta(minutes=minutes), ZONE).strftime("%Y-%m-%dT%H:%M")
 
 
-# simple: no router to arm and no field computer (team code runs on the practice server)
-@pytest.mark.parametrize(("kind", "team_machine"), [("vrc", "fc1"), ("simple", "sim")])
+# vrc: ends at its time limit. simple: no router to arm and no field computer (team code runs
+# on the practice server); the user stops it from the browser once it has scored.
+@pytest.mark.parametrize(
+    ("kind", "team_machine", "ending"),
+    [("vrc", "fc1", "time_limit"), ("simple", "sim", "stopped")],
+)
 def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     fleet_app: Flask,
     fleet_config: Config,
@@ -82,7 +86,9 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     tmp_path: Path,
     kind: str,
     team_machine: str,
+    ending: str,
 ) -> None:
+    timeout_s = RUN_SECONDS if ending == "time_limit" else 4 * RUN_SECONDS
     team_a = people_service.create_team(None, "Team A")
     team_b = people_service.create_team(None, "Team B")
     officer = make_user(Role.OFFICER)
@@ -104,7 +110,7 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     page.get_by_label("Time zone").fill(ZONE)
     page.get_by_label("Window opens").fill(_local(-1))
     page.get_by_label("Window closes").fill(_local(30))
-    page.get_by_label("Timeout (s)").fill(str(RUN_SECONDS))
+    page.get_by_label("Timeout (s)").fill(str(timeout_s))
     page.get_by_label("Uplink cap (bits)").fill("115200")
     page.get_by_role("button", name="Schedule").click()
     expect(page.get_by_text("Scheduled Walking, short for 1 team(s).")).to_be_visible()
@@ -133,18 +139,29 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
         )
         reach.executor.run(reach.by_name[team_machine], controller, timeout=30)
 
-    with start_worker(celery, pool="threads", concurrency=2, perform_ping_check=False):
-
-        def ended() -> bool:
-            supervise_runs()
+    def beat(done: Callable[[Run], bool]) -> Callable[[], bool]:
+        def check() -> bool:
+            supervise_runs()  # what the beat does every few seconds
             db.session.expire_all()
-            return db.session.get(Run, run.id).state in (RunState.FINISHED, RunState.ERROR)  # type: ignore[union-attr]
+            return done(db.session.get(Run, run.id))  # type: ignore[arg-type]
 
-        wait_for(ended, 180, "the run to end by its time limit")
+        return check
+
+    with start_worker(celery, pool="threads", concurrency=2, perform_ping_check=False):
+        if ending == "stopped":
+            wait_for(beat(lambda r: r.score >= 1), 120, "the first checkpoint")
+            page.goto(f"{live_url}/runs/{run.id}")
+            page.get_by_role("button", name="Stop run").click()
+            expect(page.get_by_text("Stopping the run.")).to_be_visible()
+        final = (RunState.FINISHED, RunState.ERROR)
+        wait_for(beat(lambda r: r.state in final), 180, f"the run to end ({ending})")
     db.session.refresh(run)
     assert run.state == RunState.FINISHED, run.error
-    assert run.end_reason == "time_limit" and run.score >= 1, (run.end_reason, run.score)
-    assert run.sim_seconds == pytest.approx(RUN_SECONDS, abs=0.01)
+    assert run.end_reason == ending and run.score >= 1, (run.end_reason, run.score)
+    if ending == "time_limit":
+        assert run.sim_seconds == pytest.approx(RUN_SECONDS, abs=0.01)
+    else:
+        assert run.sim_seconds < timeout_s and run.stop_reason == "stopped"
     assert run.uplink_bits_used >= 0 and run.active_constellation_id is None
 
     stored = {a.filename: a for a in run.artifacts}
