@@ -23,6 +23,7 @@ bench: install
 	$(BIN)/python bench/provision.py
 	$(BIN)/python bench/local_hosts.py
 	$(BIN)/python bench/router.py
+	$(BIN)/python bench/run_logs.py
 	$(BIN)/drcsim bench
 
 clean:

@@ -10,6 +10,7 @@ from sqlalchemy import select
 
 from cloudsim import migrate
 from cloudsim.cli import app_context, reports_errors
+from cloudsim.competition.demo import schedule_demo
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.fleet.service import launch
@@ -122,7 +123,7 @@ DEMO_CONSTELLATION = "demo"
 
 
 def _launch_demo(base_url: str) -> None:
-    """Launch a local vrc constellation for a demo team, unless one is already there."""
+    """Launch a local vrc constellation and a task the example controller runs, for a demo team."""
     if os.geteuid() != 0:
         click.echo("demo skipped: the local provider needs root", err=True)
         return
@@ -147,10 +148,14 @@ def _launch_demo(base_url: str) -> None:
         click.echo(
             f"demo: launching a local vrc constellation: {base_url}constellations/{created.id}"
         )
+        schedule_demo(team.id, created.id)
+        click.echo(f"demo: once it is ready, the example controller runs a task: {base_url}runs")
 
 
 @click.command()
-@click.option("--demo", is_flag=True, help="Also launch a local vrc constellation for a demo team.")
+@click.option(
+    "--demo", is_flag=True, help="Also launch a local vrc constellation and a run for a demo team."
+)
 @reports_errors
 def up(demo: bool) -> None:
     """Run CloudSim on this machine until Ctrl-C: Redis (if needed), workers, beat, web."""
