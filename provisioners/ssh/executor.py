@@ -26,6 +26,7 @@ from provisioners.ssh.result import CommandResult, Transfer
 
 T = TypeVar("T")
 
+_WINDOW = 4 << 20  # bytes of a download held in memory at most
 _CHUNK = 64 * 1024
 # after the timeout, `timeout` sends TERM, then KILL this many seconds later
 _KILL_AFTER_SECONDS = 5
@@ -139,12 +140,16 @@ class SSHExecutor:
             sftp = connection.sftp()
             try:
                 with sftp.open(remote_path, "rb") as remote_file, partial.open("wb") as out:
-                    # bounded read-ahead: fast on high-latency links, small in memory
-                    remote_file.prefetch(max_concurrent_requests=64)
-                    while chunk := remote_file.read(_CHUNK):
-                        out.write(chunk)
-                        digest.update(chunk)
-                        size += len(chunk)
+                    total = remote_file.stat().st_size or 0
+                    # pipelined reads one window at a time: fast on high-latency links, and
+                    # memory stays at a window (prefetch() keeps whatever arrives, unbounded)
+                    for start in range(0, total, _WINDOW):
+                        stop = min(start + _WINDOW, total)
+                        spans = [(at, min(_CHUNK, stop - at)) for at in range(start, stop, _CHUNK)]
+                        for chunk in remote_file.readv(spans):
+                            out.write(chunk)
+                            digest.update(chunk)
+                            size += len(chunk)
                 os.replace(partial, local)
             except (OSError, paramiko.SSHException) as exc:
                 partial.unlink(missing_ok=True)
