@@ -2,6 +2,8 @@
 (function () {
   const box = document.getElementById("constellation");
   if (!box) return;
+  const log = document.getElementById("job-log");
+  if (log) log.scrollTop = log.scrollHeight;  // the newest lines matter most
   const settled = ["ready", "error", "terminated"];
   async function poll() {
     try {

@@ -1,8 +1,9 @@
 // Live job progress: poll the job's JSON and append only the new part of its log.
 (function () {
   const box = document.getElementById("job");
-  if (!box || box.dataset.final === "true") return;
   const log = document.getElementById("job-log");
+  if (log) log.scrollTop = log.scrollHeight;  // the newest lines matter most
+  if (!box || box.dataset.final === "true") return;
   let length = log.textContent.length;
   async function poll() {
     try {
@@ -17,7 +18,7 @@
       document.getElementById("job-percent").textContent = job.progress + "%";
       document.getElementById("job-attempts").textContent = job.attempts;
       document.getElementById("job-error").textContent = job.error || "";
-      if (job.log) { log.textContent += job.log; }
+      if (job.log) { log.textContent += job.log; log.scrollTop = log.scrollHeight; }
       length = job.log_length;
       if (job.state === "succeeded" || job.state === "failed") return;
     } catch (e) { /* the server may be restarting: keep trying */ }
