@@ -123,21 +123,7 @@ def retry(actor: User | None, ref: int | str) -> Job:
     if constellation.state != ConstellationState.ERROR:
         raise Conflict(f"{constellation.name} is {constellation.state.value}, not in error")
     constellation.state = ConstellationState.PENDING
-    record(
-        "constellation.retry",
-        actor,
-        target_type="constellation",
-        target_id=constellation.id,
-        team_id=constellation.team_id,
-    )
-    db.session.commit()
-    return enqueue(
-        "constellation.launch",
-        actor,
-        target_type="constellation",
-        target_id=constellation.id,
-        team_id=constellation.team_id,
-    )
+    return _start_job(actor, constellation, "constellation.retry", "constellation.launch")
 
 
 def terminate(actor: User | None, ref: int | str) -> Job:
@@ -154,8 +140,13 @@ def terminate(actor: User | None, ref: int | str) -> Job:
     ):
         return running
     constellation.state = ConstellationState.TERMINATING
+    return _start_job(actor, constellation, "constellation.terminate", "constellation.terminate")
+
+
+def _start_job(actor: User | None, constellation: Constellation, action: str, kind: str) -> Job:
+    """Audit an action on a constellation, commit it, and start the job that carries it out."""
     record(
-        "constellation.terminate",
+        action,
         actor,
         target_type="constellation",
         target_id=constellation.id,
@@ -163,7 +154,7 @@ def terminate(actor: User | None, ref: int | str) -> Job:
     )
     db.session.commit()
     return enqueue(
-        "constellation.terminate",
+        kind,
         actor,
         target_type="constellation",
         target_id=constellation.id,
