@@ -4,9 +4,16 @@ from __future__ import annotations
 
 from constellations.plans.base import PlanContext, PlanItem
 from provisioners.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule
-from provisioners.operations import default_route, file, iptables_chain, iptables_rule
+from provisioners.operations import (
+    deb_packages,
+    default_route,
+    file,
+    iptables_chain,
+    iptables_rule,
+)
 
 FIREWALL_CHAIN = "CLOUDSIM-IN"
+MACHINE_PACKAGES = ("python3-venv", "python3-pip")
 
 
 def common(ctx: PlanContext) -> list[PlanItem]:
@@ -23,7 +30,13 @@ def common(ctx: PlanContext) -> list[PlanItem]:
             "team": ctx.team,
         },
     )
-    items: list[PlanItem] = [file("/etc/hosts", hosts), file("/etc/motd", motd)]
+    items: list[PlanItem] = [
+        # Machines have no internet: their image must carry these (the offline installs use
+        # them); this says so clearly where one does not.
+        deb_packages(MACHINE_PACKAGES),
+        file("/etc/hosts", hosts),
+        file("/etc/motd", motd),
+    ]
     gateway = ctx.kind.gateway
     if gateway is not None and gateway != ctx.machine.name and not ctx.machine.public:
         items.append(default_route(ctx.addresses[gateway]))

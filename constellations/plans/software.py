@@ -111,6 +111,20 @@ def _offline_install(
     return Action(description, run)
 
 
+def _pip_into(venv: str) -> str:
+    """Return the start of a command that makes venv and installs into it with the system pip.
+
+    A venv without its own pip, filled by the machine's pip without byte-compiling: ~4x less
+    CPU than `python3 -m venv` (which installs pip) plus the venv's pip (3.3 s -> 0.7 s for
+    csrouter, 7.0 s -> 2.8 s for the simulator), and provisioning is CPU-bound.
+    """
+    q_venv = shlex.quote(venv)
+    return (
+        f"python3 -m venv --without-pip {q_venv} && "
+        f"python3 -m pip --python {q_venv}/bin/python install --quiet --no-compile"
+    )
+
+
 def _distribution(wheel: str) -> str:
     """Return the normalised distribution name of a wheel file name."""
     return wheel.split("-", 1)[0].lower().replace("_", "-")
@@ -124,15 +138,13 @@ def install_wheelhouse(
     With `only`, just those distributions are uploaded and installed, without their
     dependencies (e.g. a client library that needs few of the package's dependencies).
     """
-    q_venv = shlex.quote(venv)
     packages = " ".join(shlex.quote(p) for p in (only or [requirement]))
     no_deps = " --no-deps" if only else ""
     return _offline_install(
         wheelhouse,
         venv,
         f"install {requirement} from {wheelhouse.name} into {venv}",
-        f"python3 -m venv {q_venv} && {q_venv}/bin/pip install --quiet --no-index{no_deps} "
-        f"--find-links {{remote}} {packages}",
+        f"{_pip_into(venv)} --no-index{no_deps} --find-links {{remote}} {packages}",
         only={p.lower() for p in only} or None,
     )
 
@@ -184,14 +196,13 @@ def build_source_bundle(root: Path, cache_dir: Path, python: str) -> Path:
 
 def install_source_bundle(bundle: Path, root: str, venv: str) -> Action:
     """Upload CloudSim's source and wheels; unpack and install it (editable) into venv, offline."""
-    q_root, q_venv = shlex.quote(root), shlex.quote(venv)
+    q_root = shlex.quote(root)
     return _offline_install(
         bundle,
         venv,
         f"install CloudSim from {bundle.name} into {venv}",
         f"rm -rf {q_root} && mkdir -p {q_root} && tar -xzf {{remote}}/{SOURCE_TARBALL} "
-        f"-C {q_root} && python3 -m venv {q_venv} && {q_venv}/bin/pip install --quiet "
-        f"--no-index --find-links {{remote}} -e {q_root}",
+        f"-C {q_root} && {_pip_into(venv)} --no-index --find-links {{remote}} -e {q_root}",
     )
 
 

@@ -50,7 +50,7 @@ def test_lan_machines_route_through_the_router_and_know_their_peers() -> None:
     plan = PLANS["common"](_context("fc1"))
     names = [item.name for item in plan]
     assert "default route via 10.211.9.50" in names
-    hosts = plan[0].steps(PathState.absent())[0]  # no /etc/hosts yet: the file is uploaded
+    hosts = plan[1].steps(PathState.absent())[0]  # no /etc/hosts yet: the file is uploaded
     assert b"10.211.9.51\tsim" in hosts.content and b"team7-fc1" in hosts.content
     router_plan = [item.name for item in PLANS["common"](_context("router"))]
     assert not any(name.startswith("default route") for name in router_plan)
