@@ -42,6 +42,7 @@ from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
 from provisioners.ssh import Machine as Target
 
 log = logging.getLogger(__name__)
+ROUTER_FAULT = "router fault (OCU traffic is held until it is fixed): "
 DRCSIM = "/opt/drcsim/bin/drcsim"
 STOP_TIMEOUT_S = 60
 MAX_STOP_ATTEMPTS = 3
@@ -214,7 +215,9 @@ def stop_run_job(ctx: JobContext) -> None:
     run.state = RunState.STOPPING
     db.session.commit()
     config: Config = current_app.config["CLOUDSIM"]
-    problems: list[str] = [run.error] if run.error else []
+    # A router fault seen during the run is kept on the record; it does not fail the run.
+    router_note = run.error if run.error and run.error.startswith(ROUTER_FAULT) else None
+    problems: list[str] = [run.error] if run.error and not router_note else []
     store = LogStore(config)
     try:
         with machines(run, config, ctx) as reach:
@@ -224,7 +227,7 @@ def stop_run_job(ctx: JobContext) -> None:
     ctx.stage("score", 90)
     score_run(run, store)
     run = _run(ctx)
-    run.error = "; ".join(problems)[:4000] or None
+    run.error = "; ".join([*problems, *([router_note] if router_note else [])])[:4000] or None
     run.state = RunState.ERROR if problems else RunState.FINISHED
     run.end_reason = run.end_reason or run.stop_reason
     run.finished_at = utcnow()
@@ -370,5 +373,21 @@ def _count_bits(run: Run, reach: Machines) -> None:
     except (CloudSimError, KeyError, TypeError, ValueError) as exc:
         # the run's end is still detected; only the live figure waits for the next beat
         log.warning("run %s: cannot read the router's counters: %s", run.id, exc)
+        _router_fault(run, reach)
         return
     run.uplink_bits_used, run.downlink_bits_used = 8 * uplink, 8 * downlink
+    _router_fault(run, reach)
+
+
+def _router_fault(run: Run, reach: Machines) -> None:
+    """Show on the run a fault of the router's csrouter (down: OCU traffic stopped), or clear it."""
+    assert reach.router is not None
+    try:
+        faults = list(router_control.status(reach.executor, reach.router).get("faults") or [])
+    except CloudSimError as exc:
+        faults = [str(exc)]
+    if faults:
+        run.error = ROUTER_FAULT + "; ".join(map(str, faults))
+        log.warning("run %s: %s", run.id, run.error)
+    elif run.error and run.error.startswith(ROUTER_FAULT):
+        run.error = None

@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import shlex
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from cloudsim.errors import CloudSimError
@@ -95,9 +94,3 @@ def status(executor: SSHExecutor, router: Target) -> dict[str, Any]:
 def disarm(executor: SSHExecutor, router: Target) -> None:
     """End the run on the router: caps and counters stop (traffic stays delayed)."""
     _csrouter(executor, router, "disarm")
-
-
-def fetch_bandwidth_log(executor: SSHExecutor, router: Target, destination: Path) -> Path:
-    """Copy the router's bandwidth log (streamed) to destination."""
-    executor.get_file(router, BANDWIDTH_LOG, destination)
-    return destination

@@ -24,7 +24,7 @@ from cloudsim.competition.artifacts import (
     remote_sha256,
     run_dir,
 )
-from cloudsim.competition.engine import machines, supervise_runs
+from cloudsim.competition.engine import ROUTER_FAULT, machines, supervise_runs
 from cloudsim.competition.plots import read_bandwidth_log
 from cloudsim.competition.schedule import in_zone
 from cloudsim.config import Config
@@ -138,6 +138,9 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
             "--timeout 120"
         )
         reach.executor.run(reach.by_name[team_machine], controller, timeout=30)
+        router_crashed = reach.router is not None
+        if router_crashed:  # the router's daemon crashes; systemd restarts it mid-run
+            reach.executor.run(reach.router, "systemctl kill --signal=KILL csrouter", timeout=30)
 
     def beat(done: Callable[[Run], bool]) -> Callable[[], bool]:
         def check() -> bool:
@@ -153,10 +156,17 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
             page.goto(f"{live_url}/runs/{run.id}")
             page.get_by_role("button", name="Stop run").click()
             expect(page.get_by_text("Stopping the run.")).to_be_visible()
+        if router_crashed:
+            wait_for(
+                beat(lambda r: (r.error or "").startswith(ROUTER_FAULT)),
+                60,
+                "the router's fault on the run",
+            )
         final = (RunState.FINISHED, RunState.ERROR)
         wait_for(beat(lambda r: r.state in final), 180, f"the run to end ({ending})")
     db.session.refresh(run)
-    assert run.state == RunState.FINISHED, run.error
+    assert run.state == RunState.FINISHED, run.error  # a recovered router fault is a note
+    assert (ROUTER_FAULT in (run.error or "")) == router_crashed
     assert run.end_reason == ending and run.score >= 1, (run.end_reason, run.score)
     if ending == "time_limit":
         assert run.sim_seconds == pytest.approx(RUN_SECONDS, abs=0.01)
