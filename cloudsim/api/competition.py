@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from flask import Response, current_app
+from flask import current_app
 from flask.views import MethodView
 from flask_smorest import Blueprint
 from marshmallow import Schema, fields, validate
@@ -13,6 +13,7 @@ from cloudsim.api.common import SelectPage, caller
 from cloudsim.competition import runs as run_service
 from cloudsim.competition import schedule, season
 from cloudsim.competition.artifacts import LogStore
+from cloudsim.web.downloads import attachment
 
 blp = Blueprint("api_competition", __name__, description="Tasks, runs, logs and scores")
 
@@ -219,14 +220,11 @@ class RunLog(MethodView):
         """Download one of the run's logs (streamed; the X-Checksum-SHA256 header to verify)."""
         artifact = run_service.get_log(caller(), run_id, artifact_id)
         store = LogStore(current_app.config["CLOUDSIM"])
-        return Response(
+        return attachment(
             store.stream(artifact.location),
-            mimetype="application/octet-stream",
-            headers={
-                "Content-Disposition": f'attachment; filename="run-{run_id}-{artifact.filename}"',
-                "Content-Length": str(artifact.size),
-                "X-Checksum-SHA256": artifact.sha256,
-            },
+            f"run-{run_id}-{artifact.filename}",
+            "application/octet-stream",
+            headers={"Content-Length": str(artifact.size), "X-Checksum-SHA256": artifact.sha256},
         )
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from typing import Any
 
-from flask import Response
 from flask.views import MethodView
 from flask_smorest import Blueprint
 
@@ -17,6 +16,7 @@ from cloudsim.api.schemas import (
     VpnBundleQuerySchema,
 )
 from cloudsim.fleet import service, vpn
+from cloudsim.web.downloads import attachment
 
 blp = Blueprint("api_constellations", __name__, description="Constellations and machines")
 
@@ -64,14 +64,7 @@ class SshBundle(MethodView):
     def get(self, ref: int) -> Any:
         """Download the constellation's SSH key bundle (officers and admins)."""
         filename, data = service.ssh_bundle(caller(), ref)
-        return Response(
-            data,
-            mimetype="application/zip",
-            headers={
-                "Content-Disposition": f'attachment; filename="{filename}"',
-                "Cache-Control": "no-store",
-            },
-        )
+        return attachment(data, filename, private=True)
 
 
 @blp.route("/constellations/<int:ref>/vpn-bundle")
@@ -82,11 +75,4 @@ class VpnBundle(MethodView):
         """Download a team user's VPN bundle: the caller's own, or (officers) user_id's."""
         constellation = service.get_constellation(caller(), ref)
         filename, data = vpn.vpn_bundle(caller(), constellation, query.get("user_id"))
-        return Response(
-            data,
-            mimetype="application/zip",
-            headers={
-                "Content-Disposition": f'attachment; filename="{filename}"',
-                "Cache-Control": "no-store",
-            },
-        )
+        return attachment(data, filename, private=True)

@@ -7,7 +7,6 @@ from typing import Any
 
 from flask import (
     Blueprint,
-    Response,
     current_app,
     flash,
     jsonify,
@@ -29,6 +28,7 @@ from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.models import Role, Run, User
 from cloudsim.people.service import visible_teams
+from cloudsim.web.downloads import attachment
 
 bp = Blueprint("competition", __name__)
 
@@ -109,11 +109,7 @@ def import_schedule() -> ResponseReturnValue:
 @bp.route("/tasks/export")
 @role_required(Role.OFFICER)
 def export_schedule() -> ResponseReturnValue:
-    return Response(
-        season.export_season(current_user),
-        mimetype="application/yaml",
-        headers={"Content-Disposition": 'attachment; filename="schedule.yaml"'},
-    )
+    return attachment(season.export_season(current_user), "schedule.yaml", "application/yaml")
 
 
 @bp.route("/tasks/<int:task_id>/start", methods=["POST"])
@@ -203,14 +199,11 @@ def stop(run_id: int) -> ResponseReturnValue:
 def download(run_id: int, artifact_id: int) -> ResponseReturnValue:
     artifact = run_service.get_log(current_user, run_id, artifact_id)
     store = LogStore(current_app.config["CLOUDSIM"])
-    return Response(
+    return attachment(
         store.stream(artifact.location),
-        mimetype="application/octet-stream",
-        headers={
-            "Content-Disposition": f'attachment; filename="run-{run_id}-{artifact.filename}"',
-            "Content-Length": str(artifact.size),
-            "X-Checksum-SHA256": artifact.sha256,
-        },
+        f"run-{run_id}-{artifact.filename}",
+        "application/octet-stream",
+        headers={"Content-Length": str(artifact.size), "X-Checksum-SHA256": artifact.sha256},
     )
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from flask import (
     Blueprint,
-    Response,
     flash,
     jsonify,
     redirect,
@@ -24,6 +23,7 @@ from cloudsim.fleet.forms import LaunchForm
 from cloudsim.jobs.views import job_summary
 from cloudsim.models import Role
 from cloudsim.people.service import visible_teams
+from cloudsim.web.downloads import attachment
 
 bp = Blueprint("fleet", __name__)
 
@@ -120,14 +120,7 @@ def retry(ref: int) -> ResponseReturnValue:
 @role_required(Role.OFFICER)
 def ssh_bundle(ref: int) -> ResponseReturnValue:
     filename, data = service.ssh_bundle(current_user, ref)
-    return Response(
-        data,
-        mimetype="application/zip",
-        headers={
-            "Content-Disposition": f'attachment; filename="{filename}"',
-            "Cache-Control": "no-store",
-        },
-    )
+    return attachment(data, filename, private=True)
 
 
 @bp.route("/constellations/<int:ref>/vpn-bundle")
@@ -137,11 +130,4 @@ def vpn_bundle(ref: int) -> ResponseReturnValue:
     constellation = service.get_constellation(current_user, ref)
     user_id = request.args.get("user_id", type=int)
     filename, data = vpn.vpn_bundle(current_user, constellation, user_id)
-    return Response(
-        data,
-        mimetype="application/zip",
-        headers={
-            "Content-Disposition": f'attachment; filename="{filename}"',
-            "Cache-Control": "no-store",
-        },
-    )
+    return attachment(data, filename, private=True)
