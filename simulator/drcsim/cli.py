@@ -33,7 +33,10 @@ def cmd_serve(args: argparse.Namespace) -> int:
     from drcsim.server import ServerSettings, SimServer
 
     options = RunOptions(
-        log_dir=args.log_dir, time_limit_s=args.time_limit, sensors=_sensor_settings(args.sensor)
+        log_dir=args.log_dir,
+        time_limit_s=args.time_limit,
+        sensors=_sensor_settings(args.sensor),
+        pose_rate_hz=args.pose_rate,
     )
     settings = ServerSettings(
         bind=args.bind,
@@ -123,6 +126,22 @@ def cmd_example(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_watch(args: argparse.Namespace) -> int:
+    """Follow a running server's poses and score as JSON lines."""
+    from drcsim.watch import watch
+
+    watch(args.server, args.port, args.rate, args.seconds)
+    return 0
+
+
+def cmd_poses(args: argparse.Namespace) -> int:
+    """Print a logged run's scene and its link poses rebuilt from the state log."""
+    from drcsim.watch import print_log_frames
+
+    print_log_frames(args.log, args.every)
+    return 0
+
+
 def cmd_worlds(_: argparse.Namespace) -> int:
     """List the worlds and their run configurations."""
     for name in WORLD_NAMES:
@@ -148,6 +167,9 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--time-limit", type=float, default=None, help="simulated seconds")
     serve.add_argument("--sensor", action="append", default=[], help="sensor setting KEY=VALUE")
     serve.add_argument("--linger", type=float, default=1.0, help="seconds to serve after the end")
+    serve.add_argument(
+        "--pose-rate", type=float, default=30.0, help="Hz of the poses topic (simulated time)"
+    )
     serve.set_defaults(func=cmd_serve)
     rep = sub.add_parser("replay", help="re-simulate a logged run and check it")
     rep.add_argument("log", type=Path)
@@ -172,6 +194,16 @@ def build_parser() -> argparse.ArgumentParser:
     example.add_argument("--world", choices=WORLD_NAMES)
     example.add_argument("--timeout", type=float, default=900.0, help="wall seconds")
     example.set_defaults(func=cmd_example)
+    follow = sub.add_parser("watch", help="print a running server's poses and score")
+    follow.add_argument("--server", required=True)
+    follow.add_argument("--port", type=int, default=7700)
+    follow.add_argument("--rate", type=float, default=10.0, help="frames per simulated second")
+    follow.add_argument("--seconds", type=float, default=60.0, help="wall seconds to follow")
+    follow.set_defaults(func=cmd_watch)
+    poses = sub.add_parser("poses", help="print a logged run's scene and link poses")
+    poses.add_argument("log", type=Path)
+    poses.add_argument("--every", type=int, default=3, help="every Nth 100 Hz state record")
+    poses.set_defaults(func=cmd_poses)
     worlds = sub.add_parser("worlds", help="list worlds and run configurations")
     worlds.set_defaults(func=cmd_worlds)
     return parser

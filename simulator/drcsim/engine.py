@@ -19,6 +19,7 @@ from drcsim.runlog import RunLog, state_digest
 from drcsim.scene import TIMESTEP, build_scene
 from drcsim.scoring import GateFrame, Observation, Scorer
 from drcsim.sensors import Sensors, SensorSettings
+from drcsim.viewer import PoseStream
 from drcsim.worlds import load_world
 
 TICK_STEPS = 10  # physics steps per 100 Hz tick (falls, scoring, state log, clock)
@@ -33,6 +34,7 @@ class RunOptions:
     time_limit_s: float | None = None
     sensors: SensorSettings = field(default_factory=SensorSettings)
     publish: Publisher | None = None
+    pose_rate_hz: float = 30.0  # frames of the on-demand `poses` topic, in simulated time
     wall_clock: Callable[[], float] = time.time
 
 
@@ -60,6 +62,8 @@ class Simulation:
         self.scorer = Scorer(self.spec.checkpoints, gates, self.spec.time_limit_s)
         self.step_count = 0
         self.active_topics: set[str] = set()
+        self.poses = PoseStream(self.client, self.options.pose_rate_hz)
+        self.pose_every = self.poses.every_steps(TIMESTEP)
         self.hose_start_z = self._hose_z()
         self.log: RunLog | None = None
         if self.options.log_dir is not None:
@@ -137,6 +141,8 @@ class Simulation:
             if publish is not None and self.active_topics:
                 for topic in self.sensors.due(self.step_count, self.active_topics):
                     publish(topic, self.sensors.compute(topic, self.sim_time))
+                if "poses" in self.active_topics and self.step_count % self.pose_every == 0:
+                    publish("poses", self.poses.frame(self.sim_time, self.step_count))
         return done
 
     def _tick(self) -> None:
@@ -209,13 +215,17 @@ class Simulation:
         }
         return Observation(positions, flags, quantities)  # type: ignore[arg-type]
 
+    def state_bodies(self) -> list[int]:
+        """Return the bodies whose state the state vector holds, in its order."""
+        scene = self.scene
+        bodies = (scene.robot, scene.vehicle, scene.hose, scene.standpipe)
+        return [body for body in bodies if body is not None]
+
     def state_vector(self) -> list[float]:
         """Return the exact dynamic state of every moving body (for determinism and replay)."""
-        client, scene = self.client, self.scene
+        client = self.client
         vector: list[float] = []
-        for body in (scene.robot, scene.vehicle, scene.hose, scene.standpipe):
-            if body is None:
-                continue
+        for body in self.state_bodies():
             pos, orn = client.getBasePositionAndOrientation(body)
             linear, angular = client.getBaseVelocity(body)
             vector.extend([*pos, *orn, *linear, *angular])

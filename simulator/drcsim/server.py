@@ -21,7 +21,7 @@ from drcsim.sensors import SENSOR_TOPICS
 log = logging.getLogger("drcsim.server")
 ZAP_ENDPOINT = "inproc://zeromq.zap.01"
 ZAP_DOMAIN = b"drcsim"
-ON_DEMAND_TOPICS = (*SENSOR_TOPICS, "robot_state")
+ON_DEMAND_TOPICS = (*SENSOR_TOPICS, "robot_state", "poses")
 ALWAYS_TOPICS = ("clock", "score")
 MAX_LAG_STEPS = 200  # beyond this the wall clock is re-anchored: the run is slower than real time
 BATCH_STEPS = 5  # physics steps between looks at the sockets in real-time mode

@@ -1,0 +1,110 @@
+"""The viewer's data: the scene description, the `poses` topic, poses rebuilt from the state log."""
+
+from __future__ import annotations
+
+import io
+import itertools
+import json
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from drcsim.cli import main
+from drcsim.client import SimClient
+from drcsim.engine import RunOptions, Simulation
+from drcsim.viewer import StateLogPoses, describe_scene, link_poses
+from drcsim.watch import watch
+
+ServerFactory = Callable[..., tuple[Any, int]]
+
+
+def test_the_scene_holds_every_body_with_its_shapes(make_sim: Callable[..., Simulation]) -> None:
+    sim = make_sim("vrc_task_1")
+    scene = describe_scene(sim.client)
+    by_id = {body["id"]: body for body in scene["bodies"]}
+    assert set(by_id) == {sim.client.getBodyUniqueId(i) for i in range(sim.client.getNumBodies())}
+    robot = by_id[sim.scene.robot]
+    assert robot["moving"] and robot["links"][0] == "pelvis" and len(robot["links"]) == 31
+    assert {"l_foot", "r_hand", "head"} <= set(robot["links"])
+    kinds = {shape["type"] for shape in robot["shapes"]}
+    assert "box" in kinds and all(len(s["rgba"]) == 4 for s in robot["shapes"])
+    assert by_id[sim.scene.vehicle]["moving"]  # type: ignore[index]
+    gate = by_id[sim.scene.gates["gate_1"].body]
+    assert not gate["moving"] and len(gate["poses"]) == 7 * len(gate["links"])
+    assert abs(gate["poses"][0] - sim.scene.gates["gate_1"].x) < 1e-6
+    ground = by_id[sim.scene.ground]  # no visual shape: drawn from its collision shape
+    assert [s["type"] for s in ground["shapes"]] == ["plane"]
+
+
+def test_poses_rebuilt_from_the_state_log_match_the_simulation(tmp_path: Path) -> None:
+    sim = Simulation("vrc_task_2", "1", RunOptions(log_dir=tmp_path / "run"))
+    sim.apply_command({"op": "behaviour", "name": "walk", "pose": [3.0, 0.5, 0.0]})
+    sim.step(1500)
+    live = {body: link_poses(sim.client, body) for body in sim.state_bodies()}
+    step = sim.step_count
+    sim.close()
+    poses = StateLogPoses(tmp_path / "run")
+    try:
+        frames = list(poses.frames(every=1, start=1.4))
+    finally:
+        poses.close()
+    assert frames[0]["t"] >= 1.4 and frames[-1]["step"] == step
+    for body, expected in live.items():
+        got = frames[-1]["poses"][str(body)]
+        positions = [i for i in range(len(expected)) if i % 7 < 3]
+        assert max(abs(got[i] - expected[i]) for i in positions) < 1e-3  # 1 mm, every link
+
+
+def test_the_poses_topic_is_computed_only_while_subscribed(server: ServerFactory) -> None:
+    _, port = server("vrc_task_2", "1")
+    with SimClient("127.0.0.1", port) as client:
+        client.hello()
+        client.subscribe("score")
+        client.step(100)
+        assert client.receive(timeout_s=0.3) is None or all(
+            topic != "poses" for topic, _ in _drain(client)
+        )
+        client.subscribe("poses")
+        time.sleep(0.2)  # the subscription travels to the server asynchronously
+        client.step(100)  # 0.1 s: three frames at 30 Hz
+        frames = [message for topic, message in _drain(client) if topic == "poses"]
+        assert len(frames) == 3
+        robot_poses = next(iter(frames[-1]["poses"].values()))
+        assert len(robot_poses) == 7 * 31 and abs(robot_poses[2] - 0.9) < 0.3
+
+
+def _drain(client: SimClient) -> list[tuple[str, dict[str, Any]]]:
+    received = []
+    while (item := client.receive(timeout_s=0.3)) is not None:
+        received.append(item)
+    return received
+
+
+def test_watch_prints_frames_at_its_rate_and_score_events(server: ServerFactory) -> None:
+    _, port = server("vrc_task_2", "1")
+    out = io.StringIO()
+    follower = threading.Thread(target=watch, args=("127.0.0.1", port, 10.0, 3.0, out))
+    follower.start()
+    time.sleep(1.0)
+    with SimClient("127.0.0.1", port) as client:
+        for _ in range(10):
+            client.step(100)
+            time.sleep(0.05)
+        client.stop()
+    follower.join()
+    lines = [json.loads(line) for line in out.getvalue().splitlines()]
+    times = [line["frame"]["t"] for line in lines if "frame" in line]
+    assert 8 <= len(times) <= 11 and all(b - a >= 0.099 for a, b in itertools.pairwise(times))
+    assert any(line.get("score", {}).get("event") == "run_end" for line in lines)
+
+
+def test_poses_command_prints_scene_then_frames(tmp_path: Path, capsys: Any) -> None:
+    sim = Simulation("vrc_task_3", "1", RunOptions(log_dir=tmp_path / "run"))
+    sim.step(300)
+    sim.close()
+    assert main(["poses", str(tmp_path / "run"), "--every", "10"]) == 0
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert lines[0]["scene"]["roles"]["robot"] == sim.scene.robot
+    assert [line["frame"]["step"] for line in lines[1:]] == [10, 110, 210]
