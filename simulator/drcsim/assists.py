@@ -17,6 +17,7 @@ GRASP_RADIUS = 0.12  # palm to object centre, metres
 GRASP_FORCE = 800.0
 VALVE_REACH = 0.3  # palm to valve centre, metres
 VALVE_SPEED = 1.0  # rad/s while turning
+CHECK_EVERY = 10  # physics steps between checks that the hand is still on the wheel
 SEAT_FORCE = 50000.0
 GRIPPER_CLOSED = 0.04
 
@@ -27,8 +28,18 @@ class Harness:
     def __init__(self, client: BulletClient, robot: int) -> None:
         self.client = client
         pos, orn = client.getBasePositionAndOrientation(robot)
+        # The pose goes in the child (world) frame: as parentFrameOrientation it was
+        # composed with every later hold() and turned any start yaw back to 0.
         self.constraint = client.createConstraint(
-            robot, -1, -1, -1, pybullet.JOINT_FIXED, [0, 0, 0], [0, 0, 0], pos, orn
+            robot,
+            -1,
+            -1,
+            -1,
+            pybullet.JOINT_FIXED,
+            [0, 0, 0],
+            [0, 0, 0],
+            pos,
+            childFrameOrientation=orn,
         )
         self.active = False
         self.release()
@@ -181,6 +192,9 @@ class Valve:
         self.scene = scene
         self.grasps = grasps
         self.goal: float | None = None
+        self.hand = "left"
+        self.steps = 0
+        self.status_word = "idle"  # idle, turning, hand_off (the hand left the wheel)
 
     def angle(self) -> float:
         """Return how far the valve has turned (rad)."""
@@ -197,22 +211,33 @@ class Valve:
         """Start turning by `angle` rad; raise if the hand is not on the wheel."""
         if self.scene.standpipe is None:
             raise CommandError("this world has no valve")
-        if _point_distance(self.grasps.palm(hand), self.centre()) > VALVE_REACH:
+        if not self.hand_on(hand):
             raise CommandError(f"the {hand} hand is not on the valve (within {VALVE_REACH} m)")
         self.goal = self.angle() + angle
+        self.hand, self.status_word = hand, "turning"
+
+    def hand_on(self, hand: str) -> bool:
+        """Return whether `hand`'s palm is on the valve wheel."""
+        return _point_distance(self.grasps.palm(hand), self.centre()) <= VALVE_REACH
 
     def apply(self) -> str:
         """Drive the valve for this step; return its status."""
         if self.scene.standpipe is None:
             return "none"
         client = self.scene.client
+        self.steps += 1
         if self.goal is not None and self.angle() >= self.goal:
-            self.goal = None
+            self.goal, self.status_word = None, "idle"
+        # The assist acts only while its condition holds: a hand that leaves the wheel stops it.
+        if self.goal is not None and self.steps % CHECK_EVERY == 0 and not self.hand_on(self.hand):
+            self.goal, self.status_word = None, "hand_off"
+        if self.goal is not None:
+            self.status_word = "turning"
         velocity, force = (VALVE_SPEED, 80.0) if self.goal is not None else (0.0, 0.5)
         client.setJointMotorControl2(
             self.scene.standpipe, 0, pybullet.VELOCITY_CONTROL, targetVelocity=velocity, force=force
         )
-        return "turning" if self.goal is not None else "idle"
+        return self.status_word
 
 
 class Seat:

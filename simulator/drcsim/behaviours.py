@@ -20,6 +20,8 @@ STRIDE = 0.6  # metres per gait cycle
 POSITION_TOLERANCE = 0.04
 YAW_TOLERANCE = 0.04
 MAX_LEAD = 0.15  # how far the harness may lead the pelvis before walking waits
+SETTLE_STEPS = 3000  # physics steps the walk may spend closing the last centimetres
+PUSH_LIMIT = 150.0  # N of contact force against a movable object that stops a walk
 REACH_EVERY = 20  # physics steps between task-space IK updates (50 Hz)
 REACH_GAIN = 0.3
 REACH_TOLERANCE = 0.02
@@ -133,6 +135,7 @@ class Behaviours:
         self.walk_status = "idle"
         self.walk_goal: tuple[float, float, float] | None = None
         self.phase = 0.0
+        self.settle_steps = 0
         pos, orn = self.client.getBasePositionAndOrientation(scene.robot)
         self.pose_cmd = [pos[0], pos[1], self.client.getEulerFromQuaternion(orn)[2]]
         self.reaches: dict[str, Reach] = {}
@@ -143,6 +146,26 @@ class Behaviours:
         gait = [f"{side}_leg_{joint}" for side in "lr" for joint in ("hpy", "kny", "aky")]
         self._gait_index = np.array([body.index(name) for name in gait])
         controller.reset_to(humanoid.STAND_POSTURE)
+
+    # -- joint ownership ----------------------------------------------------------------------
+    def owner(self, joint: str) -> str | None:
+        """Return the behaviour that drives `joint` now (it refuses team commands), if any."""
+        if joint in LEG_JOINTS or joint in TRUNK_JOINTS:
+            return self.mode if self.mode in ("stand", "walk", "seated") else None
+        for side, reach in self.reaches.items():
+            if joint in ARM_JOINTS[side]:
+                return f"reach ({reach.side} hand)"
+        return None
+
+    def check_free(self, joints: list[str]) -> None:
+        """Raise CommandError naming every joint in `joints` that a behaviour owns."""
+        owned = [(name, owner) for name in joints if (owner := self.owner(name)) is not None]
+        if owned:
+            listed = ", ".join(f"{name} (owned by {owner})" for name, owner in owned)
+            raise CommandError(
+                f"refused: {listed}; send behaviour 'none' (or 'arm_rest' for an arm) "
+                "to take the joints back"
+            )
 
     # -- commands -------------------------------------------------------------------------
     def command(self, name: str, params: dict[str, Any], fallen: bool) -> dict[str, Any]:
@@ -158,6 +181,7 @@ class Behaviours:
         elif name == "walk":
             goal = params["pose"]
             self._stand(recover=fallen)
+            self.settle_steps = 0
             self.mode, self.walk_goal, self.walk_status = (
                 "walk",
                 (goal[0], goal[1], goal[2]),
@@ -271,7 +295,16 @@ class Behaviours:
         if math.hypot(pos[0] - x, pos[1] - y) > MAX_LEAD:
             self.walk_status = "blocked"
             return
+        if self.steps % 10 == 0 and (pushed := self._pushing()) is not None:
+            # Walking into a movable object shoves it: stop where we are and say so.
+            _, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
+            self.pose_cmd = [pos[0], pos[1], self.client.getEulerFromQuaternion(orn)[2]]
+            self.mode, self.walk_status = "stand", f"blocked: pushing the {pushed}"
+            return
         self.walk_status = "walking"
+        if self.settle_steps:
+            self._settle(pos)
+            return
         heading_error = _wrap(math.atan2(gy - y, gx - x) - yaw) if distance > 1e-6 else 0.0
         turn, advance = 0.0, 0.0
         if distance > POSITION_TOLERANCE / 2:
@@ -283,7 +316,7 @@ class Behaviours:
         else:
             yaw_error = _wrap(gyaw - yaw)
             if abs(yaw_error) <= YAW_TOLERANCE / 2:
-                self.mode, self.walk_status = "stand", "done"
+                self._settle(pos)
                 return
             turn = math.copysign(min(TURN_RATE * dt, abs(yaw_error)), yaw_error)
         if advance == 0.0 and distance <= POSITION_TOLERANCE / 2:
@@ -292,6 +325,41 @@ class Behaviours:
         direction = math.atan2(gy - y, gx - x) if distance > 1e-6 else yaw
         self.pose_cmd = [x + advance * math.cos(direction), y + advance * math.sin(direction), yaw]
         self.phase += 2 * math.pi * (advance / STRIDE + abs(turn) / 1.5)
+
+    def _settle(self, pos: tuple[float, ...]) -> None:
+        """At the goal on paper: `done` only once the pelvis itself is there, else correct."""
+        assert self.walk_goal is not None
+        gx, gy, gyaw = self.walk_goal
+        _, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
+        yaw = self.client.getEulerFromQuaternion(orn)[2]
+        ex, ey = gx - pos[0], gy - pos[1]
+        if math.hypot(ex, ey) <= POSITION_TOLERANCE / 2 and abs(_wrap(gyaw - yaw)) <= YAW_TOLERANCE:
+            self.mode, self.walk_status, self.settle_steps = "stand", "done", 0
+            return
+        self.settle_steps += 1
+        if self.settle_steps > SETTLE_STEPS:
+            self.mode, self.walk_status, self.settle_steps = (
+                "stand",
+                "blocked: short of the goal",
+                0,
+            )
+            return
+        # Lead the pelvis by the remaining error (bounded), as a step correction would.
+        gain = self.controller.timestep * 2.0
+        self.pose_cmd[0] += max(-0.001, min(0.001, ex * gain))
+        self.pose_cmd[1] += max(-0.001, min(0.001, ey * gain))
+        self.pose_cmd[2] = _wrap(
+            self.pose_cmd[2] + max(-0.001, min(0.001, _wrap(gyaw - yaw) * gain))
+        )
+
+    def _pushing(self) -> str | None:
+        """Return the name of a movable object the robot pushes hard against, if any."""
+        # Static props (table, standpipe, gates) cannot be shoved: the lag check covers them.
+        car = self.scene.vehicle
+        if car is None:
+            return None
+        force = sum(p[9] for p in self.client.getContactPoints(bodyA=self.scene.robot, bodyB=car))
+        return "vehicle" if force > PUSH_LIMIT else None
 
     # -- status -------------------------------------------------------------------------------
     def status(self) -> dict[str, Any]:
@@ -303,5 +371,5 @@ class Behaviours:
             "held": {hand: name for hand, (_, name) in self.grasps.held.items()},
             "seated": self.seat.seated,
             "hose_connected": self.grasps.hose_connected,
-            "valve": "turning" if self.valve.goal is not None else "idle",
+            "valve": self.valve.status_word,
         }

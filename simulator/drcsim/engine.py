@@ -109,6 +109,8 @@ class Simulation:
     def _dispatch(self, message: dict[str, Any]) -> dict[str, Any]:
         op = message["op"]
         if op == "joints":
+            named = [n for key in ("gains", "position", "torque") for n in message.get(key, {})]
+            self.behaviours.check_free(named)  # all or nothing: a refused command changes nothing
             for name, (kp, ki, kd) in message.get("gains", {}).items():
                 self.controller.set_gains(name, kp, ki, kd)
             for name, value in message.get("position", {}).items():

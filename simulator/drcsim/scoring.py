@@ -1,4 +1,11 @@
-"""Scoring from data: ordered checkpoints as conditions over observations, falls, run end."""
+"""Scoring from data: ordered checkpoints as conditions over observations, falls, run end.
+
+Two conditions carry memory so that they cannot be gamed: `through_gate` holds once the body
+has crossed the gate line between the posts in the gate's direction (stepping into the zone
+past the line from the side does not count; crossing back undoes it), and `increase` measures
+a quantity's change since the previous checkpoint was awarded (turning the valve before the
+hose is connected earns nothing).
+"""
 
 from __future__ import annotations
 
@@ -7,7 +14,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from drcsim.errors import WorldError
-from drcsim.models.props import GATE_DEPTH
 
 FALL_HEIGHT = 0.6  # pelvis above the ground, metres
 FALL_TILT = math.radians(45)
@@ -33,22 +39,48 @@ class Observation:
     quantities: dict[str, float]
 
 
-def _through_gate(position: tuple[float, float, float], gate: GateFrame) -> bool:
+@dataclass
+class Memory:
+    """What conditions remember between ticks: gates crossed, quantities at the last award."""
+
+    crossed: set[tuple[str, str]] = field(default_factory=set)
+    baseline: dict[str, float] = field(default_factory=dict)
+
+
+def _gate_coordinates(position: tuple[float, ...], gate: GateFrame) -> tuple[float, float]:
     dx, dy = position[0] - gate.x, position[1] - gate.y
     c, s = math.cos(gate.yaw), math.sin(gate.yaw)
-    along, across = c * dx + s * dy, -s * dx + c * dy
-    return 0.0 <= along <= GATE_DEPTH and abs(across) <= gate.width / 2
+    return c * dx + s * dy, -s * dx + c * dy
 
 
-def evaluate(condition: dict[str, Any], obs: Observation, gates: dict[str, GateFrame]) -> bool:
+def crossing(before: tuple[float, ...], after: tuple[float, ...], gate: GateFrame) -> int:
+    """Return +1 (crossed forwards between the posts), -1 (backwards) or 0 (no crossing)."""
+    along0, across0 = _gate_coordinates(before, gate)
+    along1, across1 = _gate_coordinates(after, gate)
+    if (along0 < 0.0) == (along1 < 0.0):
+        return 0
+    # Where the straight path from one tick to the next meets the gate line.
+    across = across0 + (across1 - across0) * (-along0) / (along1 - along0)
+    if abs(across) > gate.width / 2:
+        return 0
+    return 1 if along1 >= 0.0 else -1
+
+
+def evaluate(
+    condition: dict[str, Any],
+    obs: Observation,
+    gates: dict[str, GateFrame],
+    memory: Memory | None = None,
+) -> bool:
     """Return whether `condition` (a one-key mapping, see README) holds for `obs`."""
+    memory = memory or Memory()
     if len(condition) != 1:
         raise WorldError(f"a condition has exactly one key, not {sorted(condition)}")
     ((kind, arg),) = condition.items()
     if kind == "all":
-        return all(evaluate(part, obs, gates) for part in arg)
+        return all(evaluate(part, obs, gates, memory) for part in arg)
     if kind == "any":
-        return any(evaluate(part, obs, gates) for part in arg)
+        return any(evaluate(part, obs, gates, memory) for part in arg)
     if kind == "flag":
         return bool(obs.flags.get(arg, False))
     if kind == "not_flag":
@@ -57,10 +89,13 @@ def evaluate(condition: dict[str, Any], obs: Observation, gates: dict[str, GateF
         return obs.quantities.get(arg["quantity"], -math.inf) >= float(arg["value"])
     if kind == "at_most":
         return obs.quantities.get(arg["quantity"], math.inf) <= float(arg["value"])
+    if kind == "increase":
+        now = obs.quantities.get(arg["quantity"], -math.inf)
+        return now - memory.baseline.get(arg["quantity"], now) >= float(arg["value"])
     if kind == "through_gate":
         if arg["gate"] not in gates or arg["body"] not in obs.positions:
             raise WorldError(f"through_gate names unknown gate or body: {arg}")
-        return _through_gate(obs.positions[arg["body"]], gates[arg["gate"]])
+        return (arg["body"], arg["gate"]) in memory.crossed
     raise WorldError(f"unknown condition {kind!r}")
 
 
@@ -77,6 +112,24 @@ class Scorer:
     ended: bool = False
     end_reason: str | None = None
     events: list[dict[str, Any]] = field(default_factory=list)
+    memory: Memory = field(default_factory=Memory)
+    previous: Observation | None = None
+
+    def _remember(self, obs: Observation) -> None:
+        before = self.previous
+        if before is None:
+            self.memory.baseline = dict(obs.quantities)
+        else:
+            for body, position in obs.positions.items():
+                if body not in before.positions:
+                    continue
+                for name, gate in self.gates.items():
+                    direction = crossing(before.positions[body], position, gate)
+                    if direction > 0:
+                        self.memory.crossed.add((body, name))
+                    elif direction < 0:
+                        self.memory.crossed.discard((body, name))
+        self.previous = obs
 
     def update(
         self, sim_time: float, obs: Observation, pelvis_height: float, pelvis_tilt: float
@@ -90,11 +143,13 @@ class Scorer:
             self.falls += 1
             new.append({"event": "fall", "falls": self.falls})
         self.down = is_down
+        self._remember(obs)
         while self.reached < len(self.checkpoints) and not self.falls >= MAX_FALLS:
             checkpoint = self.checkpoints[self.reached]
-            if not evaluate(checkpoint["when"], obs, self.gates):
+            if not evaluate(checkpoint["when"], obs, self.gates, self.memory):
                 break
             self.reached += 1
+            self.memory.baseline = dict(obs.quantities)
             new.append(
                 {
                     "event": "checkpoint",

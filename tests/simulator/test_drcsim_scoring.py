@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from drcsim.protocol import check_command
-from drcsim.scoring import GateFrame, Observation, Scorer, evaluate
+from drcsim.scoring import GateFrame, Memory, Observation, Scorer, evaluate
 
 GATES = {"g1": GateFrame(5.0, 0.0, 0.0, 2.0), "g2": GateFrame(10.0, 0.0, 0.0, 2.0)}
 RULES = [
@@ -20,9 +20,9 @@ def _obs(x: float, ready: bool = False, q: float = 0.0) -> Observation:
 
 
 def test_conditions_evaluate_from_data() -> None:
-    assert evaluate(RULES[0]["when"], _obs(5.5), GATES)
-    assert not evaluate(RULES[0]["when"], _obs(4.9), GATES)
-    assert not evaluate(RULES[0]["when"], _obs(7.5), GATES)  # beyond the gate's depth
+    crossed = Memory(crossed={("robot", "g1")})
+    assert evaluate(RULES[0]["when"], _obs(5.5), GATES, crossed)
+    assert not evaluate(RULES[0]["when"], _obs(5.5), GATES)  # never crossed the line
     assert evaluate({"not_flag": "ready"}, _obs(0.0), GATES)
     assert evaluate({"at_most": {"quantity": "q", "value": 1.0}}, _obs(0.0, q=0.5), GATES)
 

@@ -7,7 +7,6 @@ import math
 from drcsim.urdf import Joint, Link, Robot, Vec3, box, capsule, cylinder
 
 HALF_PI = math.pi / 2
-GATE_DEPTH = 2.0  # metres past the gate plane that count as "through"
 TABLE_HEIGHT = 1.0
 HOSE_SEGMENTS = 3
 HOSE_SEGMENT_LENGTH = 0.25
