@@ -12,9 +12,11 @@ from typing import Any
 from drcsim import __version__
 from drcsim._bullet import new_client
 from drcsim.behaviours import Behaviours
+from drcsim.briefing import rough_briefing
 from drcsim.control import JointController
 from drcsim.driving import VehicleDrive
 from drcsim.errors import CommandError
+from drcsim.estimator import Estimator
 from drcsim.runlog import RunLog, state_digest
 from drcsim.scene import TIMESTEP, build_scene
 from drcsim.scoring import GateFrame, Observation, Scorer
@@ -55,6 +57,8 @@ class Simulation:
             else None
         )
         self.behaviours = Behaviours(self.scene, self.controller, self.drive, self.spec.assists)
+        self.briefing = rough_briefing(self.scene.course, self.spec)
+        self.estimator = Estimator(self.client, self.scene.robot, self.controller, self.spec.seed)
         self.sensors = Sensors(
             self.scene, self.controller, self.options.sensors, self.spec.seed, TIMESTEP
         )
@@ -149,6 +153,7 @@ class Simulation:
 
     def _tick(self) -> None:
         self.behaviours.coupling.tick()
+        self.estimator.update()
         pos, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
         matrix = self.client.getMatrixFromQuaternion(orn)
         tilt = math.acos(max(-1.0, min(1.0, matrix[8])))
@@ -238,14 +243,14 @@ class Simulation:
 
     def snapshot(self) -> dict[str, Any]:
         """Return the robot's state as sent to controllers (lock-step replies, robot_state)."""
-        pos, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
+        estimate = self.estimator
         return {
             "t": round(self.sim_time, 6),
             "step": self.step_count,
-            "pelvis": {"position": list(pos), "orientation": list(orn)},
+            "pelvis": estimate.pelvis(),
             "joints": {
-                "position": self.controller.position.tolist(),
-                "velocity": self.controller.velocity.tolist(),
+                "position": estimate.joint_position.tolist(),
+                "velocity": estimate.joint_velocity.tolist(),
             },
             "behaviour": self.behaviours.status(),
             "score": {

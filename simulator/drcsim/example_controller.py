@@ -1,8 +1,9 @@
 """An example team controller: drives each task through the client library only.
 
 It uses the course briefing from the hello reply (where the vehicle, gates, table, hose and
-standpipe were placed at the start) the way a team would use its perception, and the
-server's behaviours for balance, walking and reaching.
+standpipe roughly are) and feels around those positions with the hand where precision
+matters (grasping the coupler, finding the inlet), and the server's behaviours for balance,
+walking and reaching.
 """
 
 from __future__ import annotations
@@ -19,6 +20,9 @@ if TYPE_CHECKING:
     from drcsim.local import LocalClient
 
 Log = Callable[[str], None]
+# Offsets (m) tried in turn around a roughly known position until the hand finds the object.
+SEARCH = [(0.0, 0.0), (0.06, 0.0), (-0.06, 0.0), (0.0, 0.06), (0.0, -0.06)]
+SEARCH += [(0.06, 0.06), (-0.06, -0.06), (0.06, -0.06), (-0.06, 0.06)]
 
 
 def _yaw(orientation: list[float]) -> float:
@@ -164,9 +168,15 @@ class ExampleController:
         valve = course["standpipe"]["valve"]
         table_x = course["table"]["pose"][0]
         self.walk(hose[0] - 0.45, hose[1] + 0.3, 0.0)
-        self.reach("right", [hose[0] - 0.25, hose[1], hose[2] + 0.3])
-        self.reach("right", [hose[0], hose[1], hose[2] + 0.04])
-        self.log(f"grasp: {self.client.behaviour('grasp', hand='right')}")
+        # The briefing is rough: feel for the coupler around where it should be.
+        for dx, dy in SEARCH:
+            self.reach("right", [hose[0] - 0.25 + dx, hose[1] + dy, hose[2] + 0.3])
+            self.reach("right", [hose[0] + dx, hose[1] + dy, hose[2] + 0.04])
+            grasped = self.client.behaviour("grasp", hand="right").get("grasped")
+            self.log(f"grasp at {dx:+.2f} {dy:+.2f}: {grasped}")
+            if grasped:
+                break
+            self.client.behaviour("release", hand="right")
         self.reach("right", [0.45, -0.3, 0.35], frame="pelvis")
         self.log(f"lifted: {self.advance(0.5)['score']}")
         # Back away from the table before heading for the standpipe.
@@ -180,9 +190,13 @@ class ExampleController:
 
         self.walk(*near(inlet, -0.45, 0.3), pipe_yaw)
         # Line the coupler up in front of the inlet, then push it home.
-        self.reach("right", [*near(inlet, -0.15, 0.0), inlet[2]], tool=True)
-        self.reach("right", inlet, tool=True, limit_s=6.0)
-        self.log(f"at the inlet: {self.advance(1.0)['score']}")
+        for dx, dy in SEARCH:
+            self.reach("right", [*near(inlet, -0.15 + dx, dy), inlet[2]], tool=True)
+            self.reach("right", [*near(inlet, dx, dy), inlet[2]], tool=True, limit_s=6.0)
+            state = self.advance(1.0)
+            self.log(f"at the inlet {dx:+.2f} {dy:+.2f}: {state['score']}")
+            if state["behaviour"].get("hose_connected") or state["score"]["ended"]:
+                break
         self.reach("right", [0.3, -0.3, 0.0], frame="pelvis")
         self.client.behaviour("arm_rest", hand="right")
         self.walk(*near(valve, -0.5, -0.3), pipe_yaw)

@@ -25,6 +25,7 @@ class SensorSettings:
     imu_hz: float = 100.0
     gyro_noise: float = 0.002
     accel_noise: float = 0.02
+    attitude_noise: float = 0.003  # rad, on each of roll, pitch, yaw of the orientation
     lidar_hz: float = 40.0
     lidar_beams: int = 1081
     lidar_fov: float = math.radians(270)
@@ -36,7 +37,7 @@ class SensorSettings:
     camera_height: int = 240
     camera_fov_deg: float = 80.0
     camera_noise: float = 2.0  # intensity levels (0..255)
-    camera_stereo: bool = False  # adds a right image 7 cm to the right of the left one
+    camera_stereo: bool = True  # the right image, 7 cm to the right of the left one
     contact_hz: float = 100.0
     contact_noise: float = 0.5  # newtons
 
@@ -111,8 +112,12 @@ class Sensors:
         rotate = np.array(client.getMatrixFromQuaternion(inverse)).reshape(3, 3)
         gyro = rotate @ np.array(angular) + rng.normal(0, self.settings.gyro_noise, 3)
         accel = rotate @ np.array(accel_world) + rng.normal(0, self.settings.accel_noise, 3)
+        roll, pitch, yaw = client.getEulerFromQuaternion(orn)
+        tilt = rng.normal(0.0, self.settings.attitude_noise, 3)
         return {
-            "orientation": list(orn),
+            "orientation": list(
+                client.getQuaternionFromEuler([roll + tilt[0], pitch + tilt[1], yaw + tilt[2]])
+            ),
             "angular_velocity": gyro.tolist(),
             "linear_acceleration": accel.tolist(),
         }
@@ -123,6 +128,15 @@ class Sensors:
         )
         rotation = np.array(self.scene.client.getMatrixFromQuaternion(state[1])).reshape(3, 3)
         return np.array(state[0]), rotation
+
+    def _head_in_pelvis(self) -> dict[str, list[float]]:
+        """Return the head frame in the pelvis frame (kinematics the robot knows, like tf)."""
+        client, robot = self.scene.client, self.scene.robot
+        head = client.getLinkState(robot, self.scene.robot_links[humanoid.HEAD_LINK])
+        base_pos, base_orn = client.getBasePositionAndOrientation(robot)
+        inv_pos, inv_orn = client.invertTransform(base_pos, base_orn)
+        pos, orn = client.multiplyTransforms(inv_pos, inv_orn, head[0], head[1])
+        return {"position": list(pos), "orientation": list(orn)}
 
     def _lidar(self, rng: np.random.Generator, sim_time: float) -> dict[str, Any]:
         s = self.settings
@@ -152,6 +166,7 @@ class Sensors:
             "spindle": spindle,
             "range_max": s.lidar_range,
             "ranges": ranges.tobytes(),
+            "head_in_pelvis": self._head_in_pelvis(),
         }
 
     def _render(self, eye: np.ndarray, rotation: np.ndarray, rng: np.random.Generator) -> bytes:
@@ -184,6 +199,7 @@ class Sensors:
             "height": s.camera_height,
             "encoding": "rgb8",
             "data": self._render(left, rotation, rng),
+            "head_in_pelvis": self._head_in_pelvis(),
         }
         if s.camera_stereo:
             right = left - rotation[:, 1] * 0.07

@@ -71,7 +71,7 @@ def describe_run(sim: Simulation, lockstep: bool) -> dict[str, Any]:
         "behaviours": sorted(BEHAVIOURS),
         "topics": [*ALWAYS_TOPICS, *ON_DEMAND_TOPICS],
         "checkpoints": [c["name"] for c in spec.checkpoints],
-        "course": sim.scene.course,
+        "course": sim.briefing,
     }
 
 

@@ -1,0 +1,62 @@
+"""The world is known only through sensors: a noisy state estimate and a rough briefing."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from drcsim.local import LocalClient
+from drcsim.protocol import check_command
+from drcsim.sensors import SensorSettings
+
+
+def test_state_is_an_estimate_from_noisy_sensors_not_ground_truth(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "1")
+    client = LocalClient(sim)
+    client.behaviour("walk", pose=[4.0, 0.5, 0.0])
+    state = client.step(6000)
+    true_pos, _ = sim.client.getBasePositionAndOrientation(sim.scene.robot)
+    error = math.dist(state["pelvis"]["position"][:2], true_pos[:2])
+    assert 0.0 < error < 0.3  # dead reckoning drifts, a little
+    joints = np.array(state["joints"]["position"])
+    assert 0.0 < np.max(np.abs(joints - sim.controller.position)) < 0.01
+    assert client.state() == client.state()  # reading the state changes nothing
+
+
+def test_the_briefing_gives_rough_positions_and_the_task(make_sim) -> None:
+    for world in ("vrc_task_1", "vrc_task_3"):
+        sim = make_sim(world, "2")
+        briefing = LocalClient(sim).hello()["course"]
+        exact = sim.scene.course
+        assert briefing["task"]["checkpoints"] == [c["name"] for c in sim.spec.checkpoints]
+        items = [(briefing[k], exact[k], "pose") for k in ("vehicle", "table") if k in exact]
+        items += [(briefing["gates"][g], exact["gates"][g], "pose") for g in exact.get("gates", {})]
+        if "hose" in exact:
+            items += [(briefing["hose"], exact["hose"], "coupler")]
+            items += [(briefing["standpipe"], exact["standpipe"], "inlet")]
+        errors = [math.dist(b[key][:2], e[key][:2]) for b, e, key in items]
+        assert all(
+            err <= b["accuracy_m"] + 0.01 for err, (b, _, _) in zip(errors, items, strict=True)
+        )
+        assert max(errors) > 0.01  # not the exact poses
+
+
+def test_the_stereo_pair_is_on_by_default(make_sim) -> None:
+    assert SensorSettings().camera_stereo is True
+    settings = SensorSettings(camera_width=32, camera_height=24)
+    sim = make_sim("vrc_task_2", "1", sensors=settings)
+    message = sim.sensors.compute("camera", 0.0)
+    assert len(message["data"]) == len(message["right"]) == 32 * 24 * 3
+    assert set(message["head_in_pelvis"]) == {"position", "orientation"}
+
+
+def test_estimate_does_not_touch_the_physics(make_sim) -> None:
+    first, second = make_sim("vrc_task_2", "3"), make_sim("vrc_task_2", "3")
+    for sim in (first, second):
+        sim.apply_command(check_command({"op": "behaviour", "name": "walk", "pose": [1, 0, 0]}))
+    first.step(500)
+    for _ in range(50):
+        second.step(10)
+        second.snapshot()
+    assert first.state_vector() == second.state_vector()
+    assert first.snapshot()["pelvis"] == second.snapshot()["pelvis"]
