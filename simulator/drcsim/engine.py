@@ -225,7 +225,7 @@ class Simulation:
     def state_bodies(self) -> list[int]:
         """Return the bodies whose state the state vector holds, in its order."""
         scene = self.scene
-        bodies = (scene.robot, scene.vehicle, scene.hose, scene.standpipe)
+        bodies = (scene.robot, scene.vehicle, scene.hose, scene.standpipe, *scene.rubble)
         return [body for body in bodies if body is not None]
 
     def state_vector(self) -> list[float]:
@@ -236,7 +236,7 @@ class Simulation:
             pos, orn = client.getBasePositionAndOrientation(body)
             linear, angular = client.getBaseVelocity(body)
             vector.extend([*pos, *orn, *linear, *angular])
-            joints = client.getJointStates(body, range(client.getNumJoints(body)))
+            joints = client.getJointStates(body, range(client.getNumJoints(body))) or []
             for state in joints:
                 vector.extend(state[:2])
         return [float(v) for v in vector]

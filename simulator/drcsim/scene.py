@@ -30,10 +30,18 @@ class TerrainPatch:
     upper: tuple[float, float]
     walk_speed: float
     height: float
+    ramp: float = 0.0  # hills: length of the slope at each end (the top is `height` high)
 
     def contains(self, x: float, y: float) -> bool:
         """Return whether the point (x, y) lies over this patch."""
         return self.lower[0] <= x <= self.upper[0] and self.lower[1] <= y <= self.upper[1]
+
+    def surface(self, x: float) -> float:
+        """Return the walking surface height at `x` (inside the patch)."""
+        if self.ramp <= 0.0:
+            return self.height
+        into = min(x - self.lower[0], self.upper[0] - x)
+        return self.height * max(0.0, min(1.0, into / self.ramp))
 
 
 @dataclass(frozen=True)
@@ -63,6 +71,7 @@ class Scene:
     table: int | None = None
     gates: dict[str, Gate] = field(default_factory=dict)
     terrain: list[TerrainPatch] = field(default_factory=list)
+    rubble: list[int] = field(default_factory=list)
     course: dict[str, Any] = field(default_factory=dict)
 
     def terrain_at(self, x: float, y: float) -> TerrainPatch | None:
@@ -75,7 +84,7 @@ class Scene:
     def ground_height(self, x: float, y: float) -> float:
         """Return the walking surface height under (x, y)."""
         patch = self.terrain_at(x, y)
-        return patch.height if patch else 0.0
+        return patch.surface(x) if patch else 0.0
 
 
 def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
@@ -107,44 +116,109 @@ def _load(client: BulletClient, model: Robot, xyz: list[float], yaw: float) -> i
 
 
 def _static_box(
-    client: BulletClient, half: list[float], centre: list[float], yaw: float, rgba: list[float]
+    client: BulletClient,
+    half: list[float],
+    centre: list[float],
+    yaw: float,
+    rgba: list[float],
+    pitch: float = 0.0,
+    mass: float = 0.0,
 ) -> int:
     shape = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
     visual = client.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=rgba)
-    return int(client.createMultiBody(0, shape, visual, centre, yaw_quaternion(yaw)))
+    orientation = client.getQuaternionFromEuler([0.0, pitch, yaw])
+    return int(client.createMultiBody(mass, shape, visual, centre, orientation))
+
+
+def _mud(
+    client: BulletClient, patch: dict[str, Any], centre: list[float], half: list[float]
+) -> float:
+    # A soft slab 2 cm proud of the ground: feet sink into it (contact stiffness and damping)
+    # and slip (friction); softer mud sinks deeper.
+    body = _static_box(client, [*half, 0.1], [*centre, -0.08], 0.0, [0.35, 0.25, 0.1, 1])
+    client.changeDynamics(
+        body,
+        -1,
+        lateralFriction=float(patch["friction"]),
+        contactStiffness=float(patch["stiffness"]),
+        contactDamping=float(patch["damping"]),
+    )
+    return 0.02
+
+
+def _rubble(
+    client: BulletClient, patch: dict[str, Any], rng: np.random.Generator, scene: Scene
+) -> None:
+    # Loose blocks of varied size that move when stepped on, placed without overlaps.
+    lower, upper = patch["min"], patch["max"]
+    placed: list[tuple[float, float, float]] = []
+    density = float(patch.get("density", 900.0))
+    for _ in range(int(patch["blocks"])):
+        size = rng.uniform([0.12, 0.12, 0.03], [0.4, 0.4, float(patch["max_height"])])
+        radius = float(math.hypot(size[0], size[1]) / 2)
+        for _attempt in range(20):
+            x = float(rng.uniform(lower[0] + radius, upper[0] - radius))
+            y = float(rng.uniform(lower[1] + radius, upper[1] - radius))
+            if all(math.hypot(x - px, y - py) > radius + pr for px, py, pr in placed):
+                break
+        else:
+            continue
+        placed.append((x, y, radius))
+        block = _static_box(
+            client,
+            list(size / 2),
+            [x, y, float(size[2]) / 2 + 0.001],
+            float(rng.uniform(-math.pi, math.pi)),
+            [0.5, 0.5, 0.45, 1],
+            mass=float(np.prod(size)) * density,
+        )
+        client.changeDynamics(block, -1, lateralFriction=float(patch["friction"]))
+        scene.rubble.append(block)
+
+
+def _hill(
+    client: BulletClient, patch: dict[str, Any], half: list[float], centre: list[float]
+) -> float:
+    # Up a slope, across a flat top, down again (along x); `rise` m high, `slope` degrees.
+    rise, slope = float(patch["rise"]), math.radians(float(patch["slope"]))
+    ramp = rise / math.tan(slope)
+    lower_x, upper_x = patch["min"][0], patch["max"][0]
+    thick = 0.2
+    top = upper_x - lower_x - 2 * ramp
+    colour = [0.45, 0.5, 0.35, 1]
+    _static_box(
+        client, [top / 2, half[1], thick / 2], [centre[0], centre[1], rise - thick / 2], 0.0, colour
+    )
+    length = math.hypot(ramp, rise)
+    for sign, start in ((1, lower_x), (-1, upper_x)):
+        # A plank whose top face runs from the ground at `start` to the top of the hill.
+        mid_x = start + sign * ramp / 2
+        normal_x, normal_z = -sign * math.sin(slope), math.cos(slope)
+        body = _static_box(
+            client,
+            [length / 2, half[1], thick / 2],
+            [mid_x - normal_x * thick / 2, centre[1], rise / 2 - normal_z * thick / 2],
+            0.0,
+            colour,
+            pitch=-sign * slope,
+        )
+        client.changeDynamics(body, -1, lateralFriction=float(patch.get("friction", 0.9)))
+    return ramp
 
 
 def _build_terrain(client: BulletClient, spec: WorldSpec, scene: Scene) -> None:
-    rng = np.random.default_rng(spec.seed)
     for patch_id, patch in spec.terrain.items():
         lower, upper = patch["min"], patch["max"]
         centre = [(lower[0] + upper[0]) / 2, (lower[1] + upper[1]) / 2]
         half = [(upper[0] - lower[0]) / 2, (upper[1] - lower[1]) / 2]
+        height, ramp = 0.0, 0.0
         if patch["kind"] == "mud":
-            # A soft slab 2 cm proud of the ground: feet sink into it and slip.
-            body = _static_box(client, [*half, 0.1], [*centre, -0.08], 0.0, [0.35, 0.25, 0.1, 1])
-            client.changeDynamics(
-                body,
-                -1,
-                lateralFriction=float(patch["friction"]),
-                contactStiffness=float(patch["stiffness"]),
-                contactDamping=float(patch["damping"]),
-            )
-            height = 0.02
+            height = _mud(client, patch, centre, half)
         elif patch["kind"] == "rubble":
-            height = 0.0
-            for _ in range(int(patch["blocks"])):
-                size = rng.uniform([0.15, 0.15, 0.02], [0.4, 0.4, float(patch["max_height"])])
-                x = rng.uniform(lower[0], upper[0])
-                y = rng.uniform(lower[1], upper[1])
-                block = _static_box(
-                    client,
-                    list(size / 2),
-                    [x, y, size[2] / 2],
-                    float(rng.uniform(-math.pi, math.pi)),
-                    [0.5, 0.5, 0.45, 1],
-                )
-                client.changeDynamics(block, -1, lateralFriction=float(patch["friction"]))
+            pass  # loose blocks come after the robot (see build_scene)
+        elif patch["kind"] == "hill":
+            ramp = _hill(client, patch, half, centre)
+            height = float(patch["rise"])
         else:
             raise WorldError(f"terrain patch {patch_id!r} has unknown kind {patch['kind']!r}")
         scene.terrain.append(
@@ -154,6 +228,7 @@ def _build_terrain(client: BulletClient, spec: WorldSpec, scene: Scene) -> None:
                 (upper[0], upper[1]),
                 float(patch["walk_speed"]),
                 height,
+                ramp,
             )
         )
 
@@ -224,6 +299,11 @@ def build_scene(client: BulletClient, spec: WorldSpec) -> Scene:
     scene.robot_joints, scene.robot_links = _joint_maps(client, scene.robot)
     for link in (scene.robot_links["l_foot"], scene.robot_links["r_foot"]):
         client.changeDynamics(scene.robot, link, lateralFriction=1.0)
+    # Loose rubble after the robot, so the robot stays the first moving body.
+    rng = np.random.default_rng(spec.seed)
+    for patch in spec.terrain.values():
+        if patch["kind"] == "rubble":
+            _rubble(client, patch, rng, scene)
     _build_objects(client, spec, scene)
     scene.course["robot_start"] = list(spec.robot_start)
     return scene
