@@ -24,6 +24,7 @@ bench: install
 	$(BIN)/python bench/local_hosts.py
 	$(BIN)/python bench/router.py
 	$(BIN)/python bench/run_logs.py
+	$(BIN)/python bench/viewer.py
 	$(BIN)/drcsim bench
 
 clean:

@@ -71,6 +71,10 @@ def create_app(config: Config | None = None) -> Flask:
     init_login(app)
     init_api(app)
     register_web(app)  # after the API: its error pages answer JSON under /api/ too
+
+    from cloudsim.viewer import init_app as init_viewer
+
+    init_viewer(app)
     return app
 
 

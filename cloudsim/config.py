@@ -115,6 +115,18 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_RUN_GRACE_SECONDS": Setting(
         "120", "Wall seconds past a run's timeout after which CloudSim stops it regardless"
     ),
+    "CLOUDSIM_VIEWER_LIVE_HZ": Setting(
+        "10", "Frames per simulated second a live 3D viewer receives (the relay's rate)"
+    ),
+    "CLOUDSIM_VIEWER_LIVE_DELAY_MS": Setting(
+        "1500", "How far behind the newest relayed frame a live 3D view plays (smooths polling)"
+    ),
+    "CLOUDSIM_VIEWER_POLL_MS": Setting(
+        "250", "Shortest interval between two live-frame requests of one viewer (else 429)"
+    ),
+    "CLOUDSIM_VIEWER_MAX_LIVE": Setting(
+        "8", "Live 3D viewers allowed per run at once (one more gets 503)"
+    ),
 }
 
 
@@ -155,6 +167,10 @@ class Config:
     leaderboard_for_users: str
     run_supervise_seconds: int
     run_grace_seconds: int
+    viewer_live_hz: int
+    viewer_live_delay_ms: int
+    viewer_poll_ms: int
+    viewer_max_live: int
     testing: bool = False
 
     def __repr__(self) -> str:
@@ -238,6 +254,10 @@ class Config:
             ),
             run_supervise_seconds=number("CLOUDSIM_RUN_SUPERVISE_SECONDS"),
             run_grace_seconds=number("CLOUDSIM_RUN_GRACE_SECONDS"),
+            viewer_live_hz=number("CLOUDSIM_VIEWER_LIVE_HZ"),
+            viewer_live_delay_ms=number("CLOUDSIM_VIEWER_LIVE_DELAY_MS"),
+            viewer_poll_ms=number("CLOUDSIM_VIEWER_POLL_MS"),
+            viewer_max_live=number("CLOUDSIM_VIEWER_MAX_LIVE"),
         )
         values.update(overrides)
         return cls(**values)  # type: ignore[arg-type]

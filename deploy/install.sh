@@ -30,6 +30,21 @@ if [ ${#missing[@]} -gt 0 ]; then
     [ "$made_policy" = 1 ] && rm -f "$policy"
 fi
 
+# Browser libraries (three.js for the run viewer) from the npm registry, pinned by
+# package-lock.json, copied to where the app serves static files: pages never fetch elsewhere.
+vendor=templates/web/static/vendor
+npm_digest=$(cat package.json package-lock.json | sha256sum | cut -c1-16)
+if [ ! -f "$vendor/.stamp" ] || [ "$(cat "$vendor/.stamp")" != "$npm_digest" ]; then
+    command -v npm >/dev/null || { echo "install: npm is missing (Debian/nodesource nodejs)" >&2; exit 1; }
+    echo "install: npm ci (three.js)"
+    npm ci --no-audit --no-fund --ignore-scripts --loglevel=error
+    mkdir -p "$vendor/three"
+    cp node_modules/three/build/three.module.js node_modules/three/build/three.core.js \
+        node_modules/three/examples/jsm/controls/OrbitControls.js node_modules/three/LICENSE \
+        "$vendor/three/"
+    echo "$npm_digest" >"$vendor/.stamp"
+fi
+
 # The orchestrator, and the distributions it installs onto machines (for their tests).
 subprojects=()
 for sub in simulator router; do

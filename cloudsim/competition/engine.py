@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import shlex
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import timedelta
@@ -75,8 +75,13 @@ class Machines:
 
 
 @contextmanager
-def machines(run: Run, config: Config, ctx: JobContext | None = None) -> Iterator[Machines]:
-    """Connect to the run's sim and router."""
+def machines(
+    run: Run,
+    config: Config,
+    ctx: JobContext | None = None,
+    sink: Callable[[str, str], None] | None = None,
+) -> Iterator[Machines]:
+    """Connect to the run's sim and router; output lines go to the job log or to `sink`."""
     constellation = run.constellation
     if constellation is None:
         raise RunError(f"run {run.id}: its constellation no longer exists")
@@ -90,7 +95,7 @@ def machines(run: Run, config: Config, ctx: JobContext | None = None) -> Iterato
     router = by_role.get("router")
     executor = SSHExecutor(
         MachineHostKeys(constellation),
-        log_sink=ctx.line_sink() if ctx else None,
+        log_sink=ctx.line_sink() if ctx else sink,
         secrets=[keys.private],
         connect_policy=ConnectPolicy(deadline=60),
     )

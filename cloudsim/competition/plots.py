@@ -115,7 +115,10 @@ def line_chart(
 
     parts = [
         f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {width} {height}" '
-        f'class="chart" role="img" aria-label="{escape(title)}">',
+        f'class="chart" role="img" aria-label="{escape(title)}" '
+        # where x = 0 and x = x_max fall, so a page can mark a moment (the 3D replay does)
+        f'data-x0="{px(0):.1f}" data-x1="{px(x_max):.1f}" data-x-max="{x_max:g}" '
+        f'data-y0="{top}" data-y1="{py(0):.1f}">',
         f"<title>{escape(title)}</title>",
         f'<text x="{left}" y="16" class="chart-title">{escape(title)}</text>',
         f'<line x1="{left}" y1="{py(0):.1f}" x2="{width - right}" y2="{py(0):.1f}" stroke="#888"/>',

@@ -137,7 +137,7 @@ def run(run_id: int) -> ResponseReturnValue:
         "competition/run.html",
         run=shown,
         score_plot=_score_plot(shown),
-        bandwidth_plots=_bandwidth_plots(shown),
+        bandwidth_plots=bandwidth_plots_of(shown),
         bits_left=_bits_left(shown),
         confirm=ConfirmForm(),
     )
@@ -148,7 +148,8 @@ def _score_plot(run: Run) -> Any:
     return score_chart(events, run.sim_seconds)
 
 
-def _bandwidth_plots(run: Run) -> list[Any]:
+def bandwidth_plots_of(run: Run) -> list[Any]:
+    """Return the run's bandwidth charts (none before its bandwidth log is stored)."""
     bandwidth = next((a for a in run.artifacts if a.filename == "bandwidth.jsonl"), None)
     if bandwidth is None:
         return []

@@ -16,6 +16,7 @@ from typing import Any
 from drcsim._bullet import BulletClient, pybullet
 
 FORMAT = 1
+TICK_STEPS = 10  # physics steps per state-log record (100 Hz)
 POSE_DECIMALS = 6  # micrometres: far below what a viewer (or a 1 mm comparison) resolves
 GEOMETRY = {
     pybullet.GEOM_SPHERE: "sphere",
@@ -174,6 +175,7 @@ class StateLogPoses:
         )
         self.client = self.sim.client
         self.bodies = self.sim.state_bodies()
+        self._marks: set[tuple[float, int]] = set()  # (t, byte offset) of whole seconds
 
     def scene(self) -> dict[str, Any]:
         """Return the world's description (as `describe_scene`), with the robot's roles."""
@@ -199,21 +201,46 @@ class StateLogPoses:
         """Yield a frame for every `every`-th 100 Hz state record with start <= t < stop."""
         import struct
 
-        from drcsim.runlog import read_states
+        import msgpack
 
-        for index, record in enumerate(read_states(self.log_dir)):
-            t = float(record["t"])
-            if t >= stop:
-                return
-            if index % every or t < start:
-                continue
-            raw = record["state32"]
-            self.apply(struct.unpack(f"<{len(raw) // 4}f", raw))
-            yield pose_frame(self.client, self.bodies, t, int(record["step"]))
+        from drcsim.runlog import STATE
+
+        period = every * TICK_STEPS
+        offset = max((o for t, o in self._marks if t <= start), default=0)
+        with open(self.log_dir / STATE, "rb") as handle:
+            handle.seek(offset)
+            unpacker = msgpack.Unpacker(handle, raw=False)
+            while True:
+                at = offset + unpacker.tell()
+                try:
+                    record = next(unpacker)
+                except StopIteration:
+                    return
+                t, step = float(record["t"]), int(record["step"])
+                if step % (100 * TICK_STEPS) == 0:  # remember where each second starts
+                    self._marks.add((t, at))
+                if t >= stop:
+                    return
+                if step % period or t < start:
+                    continue
+                raw = record["state32"]
+                self.apply(struct.unpack(f"<{len(raw) // 4}f", raw))
+                yield pose_frame(self.client, self.bodies, t, step)
 
     def close(self) -> None:
         """Disconnect from the physics engine."""
         self.client.disconnect()
+
+
+def world_scene(world: str, config: str | int) -> dict[str, Any]:
+    """Return the description of a world in a run configuration, as a run of it starts."""
+    from drcsim.engine import Simulation
+
+    sim = Simulation(world, config)
+    try:
+        return describe_scene(sim.client, scene_roles(sim))
+    finally:
+        sim.client.disconnect()
 
 
 def scene_roles(sim: Any) -> dict[str, Any]:

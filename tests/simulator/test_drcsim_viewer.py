@@ -47,10 +47,22 @@ def test_poses_rebuilt_from_the_state_log_match_the_simulation(tmp_path: Path) -
     sim.close()
     poses = StateLogPoses(tmp_path / "run")
     try:
-        frames = list(poses.frames(every=1, start=1.4))
+        assert len(list(poses.frames(every=1))) == 150
+        frames = list(poses.frames(every=1, start=1.4))  # from the mark of second 1 on
+        assert [f["step"] for f in poses.frames(every=5, start=0.3, stop=0.75)] == [
+            300,
+            350,
+            400,
+            450,
+            500,
+            550,
+            600,
+            650,
+            700,
+        ]
     finally:
         poses.close()
-    assert frames[0]["t"] >= 1.4 and frames[-1]["step"] == step
+    assert frames[0]["t"] == 1.4 and frames[-1]["step"] == step
     for body, expected in live.items():
         got = frames[-1]["poses"][str(body)]
         positions = [i for i in range(len(expected)) if i % 7 < 3]
@@ -107,4 +119,4 @@ def test_poses_command_prints_scene_then_frames(tmp_path: Path, capsys: Any) -> 
     assert main(["poses", str(tmp_path / "run"), "--every", "10"]) == 0
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert lines[0]["scene"]["roles"]["robot"] == sim.scene.robot
-    assert [line["frame"]["step"] for line in lines[1:]] == [10, 110, 210]
+    assert [line["frame"]["step"] for line in lines[1:]] == [100, 200, 300]

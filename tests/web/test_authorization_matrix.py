@@ -104,6 +104,12 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("competition.stop", "POST"): (LOGIN, 409, 404, 409, 409),  # it has finished
     ("competition.download", "GET"): (LOGIN, 200, 404, 200, 200),
     ("competition.leaderboard", "GET"): (LOGIN, 200, 200, 200, 200),
+    # the 3D viewer of team A's finished run (its logs hold no state log: nothing to replay;
+    # nothing live: it has ended). A live run's refusals are in tests/viewer.
+    ("viewer.view", "GET"): (LOGIN, 200, 404, 200, 200),
+    ("viewer.scene", "GET"): (LOGIN, 200, 404, 200, 200),
+    ("viewer.frames", "GET"): (LOGIN, 409, 404, 409, 409),
+    ("viewer.live_frames", "GET"): (LOGIN, 409, 404, 409, 409),
     ("api_competition.Tasks", "GET"): (401, 200, 200, 200, 200),
     ("api_competition.Tasks", "POST"): (401, 403, 403, 201, 201),
     ("api_competition.OpenTasks", "GET"): (401, 200, 200, 200, 200),

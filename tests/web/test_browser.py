@@ -26,6 +26,12 @@ CHROMIUM_ARGS = [
     "--no-first-run",
     "--disable-quic",
 ]
+# WebGL without a GPU (the 3D viewer): SwiftShader, which Chromium enables only when told to
+WEBGL_ARGS = [a for a in CHROMIUM_ARGS if a != "--disable-gpu"] + [
+    "--use-gl=angle",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+]
 
 pytestmark = pytest.mark.browser
 

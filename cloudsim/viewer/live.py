@@ -1,0 +1,175 @@
+"""Live 3D view of a running run: one relay per run, any number of (capped, throttled) viewers.
+
+The relay is a job: over SSH it runs `drcsim watch` on the run's sim machine, which follows the
+simulator's `poses` topic on the LAN and prints frames; the job keeps the newest few seconds in
+Redis. Viewers poll CloudSim for them, so the simulator machine is never exposed to a browser
+and its pose topic has one subscriber however many people watch.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shlex
+import time
+from typing import Any
+
+import redis
+from flask import current_app
+
+from cloudsim.competition.engine import DRCSIM, machines
+from cloudsim.config import Config
+from cloudsim.errors import CloudSimError, NotFound, Unavailable
+from cloudsim.extensions import db
+from cloudsim.jobs.runner import JobContext, job_kind
+from cloudsim.jobs.service import enqueue
+from cloudsim.models import Run, RunState, User
+from provisioners.ssh import SSHError
+
+log = logging.getLogger(__name__)
+BUFFER_SECONDS = 10  # of simulated time kept for viewers
+VIEWER_TTL_S = 15  # a viewer that has not polled this long no longer counts
+RELAY_LEASE_S = 20  # a relay that has not renewed this long is presumed dead
+WATCH_CHUNK_S = 120  # one `drcsim watch` call; the relay starts another while viewers remain
+CHECK_EVERY_S = 1.0
+
+
+class TooManyRequests(CloudSimError):
+    """The viewer asks faster than CLOUDSIM_VIEWER_POLL_MS allows."""
+
+    status = 429
+
+
+class _RelayDone(Exception):
+    """Nobody watches any more, or the run has ended: stop following the simulator."""
+
+
+def _key(run_id: int, what: str) -> str:
+    return f"cloudsim:viewer:run:{run_id}:{what}"
+
+
+def redis_client() -> redis.Redis:
+    """Return this app's Redis connection for the viewer's buffers."""
+    client = current_app.extensions.get("cloudsim.viewer.redis")
+    if client is None:
+        config: Config = current_app.config["CLOUDSIM"]
+        client = redis.Redis.from_url(config.effective_redis_url, decode_responses=True)
+        current_app.extensions["cloudsim.viewer.redis"] = client
+    return client
+
+
+def admit(actor: User, run: Run, viewer: str, config: Config) -> None:
+    """Count this viewer of the run; raise when it polls too fast or the run has enough viewers."""
+    client, now = redis_client(), time.time()
+    member = f"{actor.id}:{viewer[:64]}"
+    try:
+        if not client.set(_key(run.id, f"poll:{member}"), 1, nx=True, px=config.viewer_poll_ms):
+            raise TooManyRequests(f"at most one request per {config.viewer_poll_ms} ms")
+        viewers = _key(run.id, "viewers")
+        pipe = client.pipeline()
+        pipe.zremrangebyscore(viewers, 0, now - VIEWER_TTL_S)
+        pipe.zscore(viewers, member)
+        pipe.zcard(viewers)
+        _, known, count = pipe.execute()
+        if known is None and count >= config.viewer_max_live:
+            raise Unavailable(
+                f"run {run.id} already has {count} live viewers (the most allowed); try later"
+            )
+        client.zadd(viewers, {member: now})
+        client.expire(viewers, VIEWER_TTL_S * 4)
+    except redis.RedisError as exc:
+        raise Unavailable(f"the live view needs Redis: {exc}") from exc
+
+
+def ensure_relay(actor: User, run: Run) -> None:
+    """Start the run's relay job unless one is alive (one per run, whoever asks)."""
+    client = redis_client()
+    if client.set(_key(run.id, "relay"), "starting", nx=True, ex=RELAY_LEASE_S * 3):
+        enqueue("viewer.relay", actor, target_type="run", target_id=run.id, team_id=run.team_id)
+
+
+def live_frames(run: Run, after: float) -> tuple[list[str], list[dict[str, Any]], str]:
+    """Return the buffered frames newer than `after` (simulated seconds, as JSON texts), the
+    score events and the relay's state."""
+    client = redis_client()
+    pipe = client.pipeline()
+    pipe.zrangebyscore(_key(run.id, "frames"), f"({after}", "+inf")
+    pipe.lrange(_key(run.id, "events"), 0, -1)
+    pipe.get(_key(run.id, "relay"))
+    frames, events, relay = pipe.execute()
+    return frames, [json.loads(item) for item in events], relay or "stopped"
+
+
+def store_frame(client: redis.Redis, run_id: int, frame: dict[str, Any], keep: int) -> None:
+    """Add a frame to the run's live buffer (sorted by simulated time), keeping the newest."""
+    key = _key(run_id, "frames")
+    pipe = client.pipeline()
+    pipe.zadd(key, {json.dumps(frame, separators=(",", ":")): frame["t"]})
+    pipe.zremrangebyrank(key, 0, -keep - 1)
+    pipe.expire(key, RELAY_LEASE_S * 3)
+    pipe.execute()
+
+
+class _Relay:
+    """Receives `drcsim watch` output lines and keeps the newest frames in Redis."""
+
+    def __init__(self, run: Run, client: redis.Redis, config: Config) -> None:
+        self.run_id = run.id
+        self.client = client
+        self.keep = BUFFER_SECONDS * config.viewer_live_hz
+        self.checked = 0.0
+        self.frames = 0
+
+    def line(self, _machine: str, line: str) -> None:
+        """Take one output line of the watcher; raise _RelayDone when it should stop."""
+        if line.startswith('{"frame"'):
+            frame = json.loads(line)["frame"]
+            store_frame(self.client, self.run_id, frame, self.keep)
+            self.frames += 1
+        elif line.startswith('{"score"'):
+            self.client.rpush(_key(self.run_id, "events"), json.dumps(json.loads(line)["score"]))
+            self.client.expire(_key(self.run_id, "events"), 3600)
+        if time.monotonic() - self.checked >= CHECK_EVERY_S:
+            self.checked = time.monotonic()
+            self.check()
+
+    def check(self) -> None:
+        """Renew the relay's lease; raise _RelayDone when nobody watches or the run is over."""
+        self.client.set(_key(self.run_id, "relay"), "running", ex=RELAY_LEASE_S)
+        viewers = self.client.zcount(
+            _key(self.run_id, "viewers"), time.time() - VIEWER_TTL_S, "+inf"
+        )
+        db.session.expire_all()
+        run = db.session.get(Run, self.run_id)
+        if viewers == 0 or run is None or run.state != RunState.RUNNING:
+            raise _RelayDone
+
+
+@job_kind("viewer.relay")
+def relay_job(ctx: JobContext) -> None:
+    """Follow a running run's poses on its sim machine while anybody watches it live."""
+    run = db.session.get(Run, ctx.job.target_id)
+    if run is None:
+        raise NotFound(f"run {ctx.job.target_id} no longer exists")
+    config: Config = current_app.config["CLOUDSIM"]
+    client = redis_client()
+    relay = _Relay(run, client, config)
+    ctx.stage("relay", 50)
+    try:
+        with machines(run, config, sink=relay.line) as reach:
+            command = (
+                f"{DRCSIM} watch --server {shlex.quote(reach.sim_ip)} "
+                f"--rate {config.viewer_live_hz} --seconds {WATCH_CHUNK_S}"
+            )
+            while True:
+                relay.check()
+                try:
+                    reach.executor.run(reach.sim, command, timeout=WATCH_CHUNK_S + 30)
+                except SSHError:
+                    relay.check()  # the run ended under the watcher: that is no failure
+                    raise
+    except _RelayDone:
+        pass
+    finally:
+        client.delete(_key(run.id, "relay"))
+    ctx.log(f"relayed {relay.frames} frame(s) of run {run.id}; nobody watches any more")

@@ -1,0 +1,132 @@
+"""Who may watch a run in 3D and how: its scene, and replay frames from its stored state log."""
+
+from __future__ import annotations
+
+import functools
+import os
+import threading
+from collections import OrderedDict
+from pathlib import Path
+from typing import Any
+
+from drcsim.viewer import StateLogPoses, world_scene
+
+from cloudsim.competition.artifacts import LogStore, artifact_for
+from cloudsim.competition.runs import LIVE, get_run
+from cloudsim.config import Config
+from cloudsim.errors import Conflict, Forbidden, InvalidInput
+from cloudsim.models import Role, Run, RunState, User
+
+REPLAY_EVERY = 3  # every third 100 Hz state record: 33 frames per simulated second
+MAX_CHUNK_SECONDS = 30.0
+OPEN_REPLAYS = 4  # state logs kept open (a built world each) per web process
+REPLAY_LOGS = ("meta.json", "state.msgpack")
+LIVE_IS_FOR_OFFICERS = (
+    "a live run is shown in 3D to officers only; your team can replay it when it has ended"
+)
+
+
+def mode_for(actor: User, run: Run) -> str:
+    """Return how the actor may view the run ("live" or "replay"); raise when not at all."""
+    if run.state in LIVE:
+        if not actor.has_role(Role.OFFICER):
+            # fairness: a team sees its live run only through its metered link
+            raise Forbidden(LIVE_IS_FOR_OFFICERS)
+        return "live"
+    return "replay"
+
+
+def viewable_run(actor: User, run_id: int) -> tuple[Run, str]:
+    """Return a run the actor may view in 3D and how (another team's run: 404)."""
+    run = get_run(actor, run_id)
+    return run, mode_for(actor, run)
+
+
+def live_run_for(actor: User, run_id: int) -> Run:
+    """Return a running run the actor may watch live."""
+    run, mode = viewable_run(actor, run_id)
+    if mode != "live" or run.state != RunState.RUNNING:
+        raise Conflict(f"run {run.id} is {run.state.value}: there is nothing to watch live")
+    return run
+
+
+@functools.lru_cache(maxsize=16)
+def _scene(world: str, config: str) -> dict[str, Any]:
+    return world_scene(world, config)
+
+
+def scene_for(run: Run) -> dict[str, Any]:
+    """Return the run's world as the simulator built it (same world, configuration, seed)."""
+    return _scene(run.task.world, str(run.task.run_config))
+
+
+class _Replays:
+    """State logs opened for replay in this process, the least recently used closed first."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.open: OrderedDict[int, tuple[StateLogPoses, threading.Lock]] = OrderedDict()
+
+    def get(self, run_id: int, folder: Path) -> tuple[StateLogPoses, threading.Lock]:
+        with self.lock:
+            if run_id in self.open:
+                self.open.move_to_end(run_id)
+                return self.open[run_id]
+            entry = (StateLogPoses(folder), threading.Lock())
+            self.open[run_id] = entry
+            while len(self.open) > OPEN_REPLAYS:
+                _, (old, old_lock) = self.open.popitem(last=False)
+                with old_lock:
+                    old.close()
+            return entry
+
+
+_replays = _Replays()
+
+
+def _local_logs(run: Run, config: Config) -> Path:
+    """Return a local folder with the run's metadata and state log (copied once from the store)."""
+    folder = config.instance_dir / "viewer" / f"run-{run.id}"
+    missing = [name for name in REPLAY_LOGS if not (folder / name).exists()]
+    if not missing:
+        return folder
+    store = LogStore(config)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in missing:
+        artifact = artifact_for(run, name)
+        if artifact is None:
+            raise Conflict(f"run {run.id} has no {name} to replay")
+        partial = folder / f".{name}.{os.getpid()}.{threading.get_ident()}.part"
+        with partial.open("wb") as out:
+            for chunk in store.stream(artifact.location):
+                out.write(chunk)
+        partial.replace(folder / name)
+    return folder
+
+
+def replay_frames(
+    actor: User, run_id: int, start: float, seconds: float, config: Config
+) -> dict[str, Any]:
+    """Return the frames of a finished run from `start` for `seconds` of simulated time."""
+    run, mode = viewable_run(actor, run_id)
+    if mode != "replay":
+        raise Conflict(f"run {run.id} is {run.state.value}: watch it live, replay it afterwards")
+    if not (start >= 0 and 0 < seconds <= MAX_CHUNK_SECONDS):
+        raise InvalidInput(f"start must be >= 0 and seconds within (0, {MAX_CHUNK_SECONDS:g}]")
+    poses, lock = _replays.get(run.id, _local_logs(run, config))
+    with lock:
+        frames = list(poses.frames(REPLAY_EVERY, start, start + seconds))
+    return {"start": start, "seconds": seconds, "frames": frames}
+
+
+def score_marks(run: Run) -> list[dict[str, Any]]:
+    """Return the run's score events as timeline marks."""
+    return [
+        {
+            "t": e.sim_time,
+            "kind": e.kind,
+            "label": e.description or e.kind,
+            "points": e.points,
+        }
+        for e in run.score_events
+    ]

@@ -1,0 +1,105 @@
+"""Who sees what of a run in 3D, and the live relay's throttle and viewer cap."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from flask import Flask
+from flask.testing import FlaskClient
+
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.models import Job, RunState, User
+from cloudsim.viewer.live import _key, redis_client, store_frame
+from tests.conftest import log_in, running_app
+from tests.viewer.conftest import store_run
+
+
+def _client(app: Flask, user: User | None) -> FlaskClient:
+    client = app.test_client()
+    if user is not None:
+        log_in(client, user)
+    return client
+
+
+def test_a_team_replays_its_own_finished_run_and_nobody_elses(
+    app: Flask, people: dict[str, User | None], run_logs: Path
+) -> None:
+    user_a, user_b = people["user_a"], people["user_b"]
+    assert user_a is not None and user_a.team is not None
+    run = store_run(user_a.team, run_logs)
+    mine, theirs = _client(app, user_a), _client(app, user_b)
+    assert mine.get(f"/runs/{run.id}/view").status_code == 200
+    scene = mine.get(f"/runs/{run.id}/view/scene").get_json()
+    assert scene["run"]["mode"] == "replay"
+    assert [m["kind"] for m in scene["marks"]] == ["checkpoint", "run_end"]
+    body = mine.get(f"/runs/{run.id}/view/frames?start=2&seconds=1").get_json()
+    assert [f["step"] for f in body["frames"]][:2] == [2010, 2040] and len(body["frames"]) == 33
+    for path in ("", "/scene", "/frames?start=0&seconds=1", "/live"):
+        assert theirs.get(f"/runs/{run.id}/view{path}").status_code == 404
+    assert _client(app, None).get(f"/runs/{run.id}/view").status_code == 302
+    # a finished run has nothing live
+    officer = _client(app, people["officer"])
+    assert officer.get(f"/runs/{run.id}/view/live").status_code == 409
+
+
+@pytest.mark.parametrize(
+    "query", ["start=abc", "start=nan", "start=-1", "seconds=0", "seconds=31", "seconds=inf"]
+)
+def test_bad_replay_ranges_are_refused(
+    app: Flask, people: dict[str, User | None], run_logs: Path, query: str
+) -> None:
+    user_a = people["user_a"]
+    assert user_a is not None and user_a.team is not None
+    run = store_run(user_a.team, run_logs)
+    response = _client(app, user_a).get(f"/runs/{run.id}/view/frames?{query}")
+    assert response.status_code == 400
+
+
+def test_a_team_gets_no_live_view_of_its_own_running_run(
+    app: Flask, people: dict[str, User | None], run_logs: Path
+) -> None:
+    user_a = people["user_a"]
+    assert user_a is not None and user_a.team is not None
+    run = store_run(user_a.team, run_logs, RunState.RUNNING)
+    team = _client(app, user_a)
+    for path in ("", "/scene", "/live", "/frames"):
+        response = team.get(f"/runs/{run.id}/view{path}")
+        assert response.status_code == 403, path
+    assert "officers only" in team.get(f"/runs/{run.id}/view").get_data(as_text=True)
+    officer = _client(app, people["officer"])
+    assert officer.get(f"/runs/{run.id}/view").status_code == 200
+    # officers replay only finished runs
+    assert officer.get(f"/runs/{run.id}/view/frames").status_code == 409
+
+
+def test_live_viewers_are_throttled_capped_and_share_one_relay(
+    make_config: Callable[..., Config], run_logs: Path
+) -> None:
+    config = make_config(viewer_max_live=2, viewer_poll_ms=60_000)
+    with running_app(config) as app:
+        from cloudsim.models import Role
+        from cloudsim.people import service
+        from tests.conftest import make_user
+
+        team = service.create_team(None, "Team A")
+        officers = [make_user(Role.OFFICER) for _ in range(2)]
+        run = store_run(team, run_logs, RunState.RUNNING)
+        first, second = (_client(app, officer) for officer in officers)
+        url = f"/runs/{run.id}/view/live"
+        answer = first.get(f"{url}?viewer=tab1")
+        assert answer.status_code == 200 and answer.get_json()["frames"] == []
+        assert first.get(f"{url}?viewer=tab1").status_code == 429
+        assert second.get(f"{url}?viewer=tab2").status_code == 200
+        refused = second.get(f"{url}?viewer=tab3")
+        assert refused.status_code == 503 and "live viewers" in refused.get_data(as_text=True)
+        relays = db.session.scalars(db.select(Job).where(Job.kind == "viewer.relay")).all()
+        assert len(relays) == 1 and relays[0].target_id == run.id
+        # frames the relay buffers reach the viewers, newer than what they have
+        for step in (1000, 1100):
+            store_frame(redis_client(), run.id, {"t": step / 1000, "step": step, "poses": {}}, 2)
+        redis_client().delete(_key(run.id, f"poll:{officers[0].id}:tab1"))
+        frames = first.get(f"{url}?viewer=tab1&after=1.0").get_json()["frames"]
+        assert [f["step"] for f in frames] == [1100]

@@ -1,0 +1,121 @@
+"""The 3D viewer in a real headless Chromium (software WebGL): a team replays its finished run."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from urllib.parse import urlsplit
+
+import pytest
+from drcsim.viewer import world_scene
+from flask import Flask, current_app
+from playwright.sync_api import Browser, Page, expect, sync_playwright
+
+from cloudsim.competition.artifacts import LogStore, file_sha256
+from cloudsim.extensions import db
+from cloudsim.models import Artifact, Run, User
+from tests.conftest import PASSWORD
+from tests.viewer.conftest import logged_pelvis, store_run
+from tests.web.test_browser import CHROMIUM, WEBGL_ARGS, live_url  # noqa: F401
+
+pytestmark = pytest.mark.browser
+ARTIFACTS = Path(os.environ.get("CLOUDSIM_TEST_ARTIFACTS", "build/test-artifacts"))
+
+
+@pytest.fixture(scope="module")
+def webgl_browser() -> Iterator[Browser]:
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=WEBGL_ARGS)
+        yield browser
+        browser.close()
+
+
+def _log_in(page: Page, base: str, user: User) -> None:
+    page.goto(f"{base}/login")
+    page.get_by_label("E-mail").fill(user.email)
+    page.get_by_label("Password").fill(PASSWORD)
+    page.get_by_role("button", name="Log in").click()
+
+
+def _add_bandwidth_log(run: Run, tmp_path: Path) -> None:
+    lines = [{"event": "armed", "time": "2026-06-17T09:00:00+00:00", "caps_bits": {}}]
+    for second in range(1, 11):
+        for direction in ("uplink", "downlink"):
+            lines.append({"direction": direction, "second": second, "bytes": 1000 * second})
+    path = tmp_path / "bandwidth.jsonl"
+    path.write_text("".join(json.dumps(line) + "\n" for line in lines))
+    store = LogStore(current_app.config["CLOUDSIM"])
+    name = store.object_name(run.id, "bandwidth.jsonl")
+    store.put(path, name)
+    db.session.add(
+        Artifact(
+            run_id=run.id,
+            kind="bandwidth",
+            filename="bandwidth.jsonl",
+            location=name,
+            size=path.stat().st_size,
+            sha256=file_sha256(path),
+        )
+    )
+    db.session.commit()
+
+
+def test_a_team_replays_its_run_where_the_state_log_says(
+    app: Flask,
+    live_url: str,  # noqa: F811
+    webgl_browser: Browser,
+    people: dict[str, User | None],
+    run_logs: Path,
+    tmp_path: Path,
+) -> None:
+    user = people["user_a"]
+    assert user is not None and user.team is not None
+    run = store_run(user.team, run_logs)
+    _add_bandwidth_log(run, tmp_path)
+    page = webgl_browser.new_context(viewport={"width": 1280, "height": 1000}).new_page()
+    hosts: set[str] = set()
+    page.on("request", lambda request: hosts.add(urlsplit(request.url).netloc))
+    _log_in(page, live_url, user)
+    page.goto(f"{live_url}/runs/{run.id}")
+    page.get_by_role("link", name="Replay in 3D").click()
+    page.wait_for_function("window.cloudsimViewer && window.cloudsimViewer.ready", timeout=60_000)
+    assert page.evaluate("cloudsimViewer.error") is None
+
+    # the scene holds the robot and every object of the world
+    world = world_scene("vrc_task_2", "1")
+    assert page.evaluate("cloudsimViewer.bodies") == len(world["bodies"]) > 20
+    robot = page.evaluate("cloudsimViewer.robotId()")
+    assert robot == world["roles"]["robot"]
+
+    # at a given time the robot's pelvis is drawn where the state log has it
+    page.evaluate("cloudsimViewer.seek(4.2)")
+    step = page.evaluate("cloudsimViewer.step")
+    assert step == 4200
+    drawn = page.evaluate(f"cloudsimViewer.linkPosition({robot}, 0)")
+    logged = logged_pelvis(run_logs, step)
+    assert max(abs(a - b) for a, b in zip(drawn, logged, strict=True)) < 1e-3, (drawn, logged)
+    assert logged[0] > 1.0  # it has walked: a test that could not tell poses apart would pass
+
+    # a score event on the timeline jumps there; the bandwidth charts mark the same second
+    mark = page.locator(".viewer-mark.checkpoint").first
+    when = float(mark.get_attribute("data-t") or "nan")
+    mark.click()
+    page.wait_for_function(f"Math.abs(cloudsimViewer.t - {when}) < 0.04")
+    markers = page.locator("#viewer-bandwidth line.replay-mark")
+    expect(markers.first).to_have_attribute(
+        "data-second", str(int(page.evaluate("cloudsimViewer.t")))
+    )
+
+    # play at 8x: a real second moves the replay several simulated seconds
+    page.evaluate("cloudsimViewer.seek(0)")
+    page.get_by_label("Speed").select_option("8")
+    page.get_by_role("button", name="Play").click()
+    page.wait_for_function("cloudsimViewer.t > 3", timeout=5_000)
+    page.get_by_role("button", name="Pause").click()
+
+    page.evaluate("cloudsimViewer.seek(5.5)")
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.locator("#viewer").screenshot(path=str(ARTIFACTS / "viewer-replay.png"))
+    assert hosts == {urlsplit(live_url).netloc}, f"requests to other hosts: {hosts}"
