@@ -69,12 +69,12 @@ def create_app(config: Config | None = None) -> Flask:
     from cloudsim.web import register_web
 
     init_login(app)
-    init_api(app)
+    api = init_api(app)
     register_web(app)  # after the API: its error pages answer JSON under /api/ too
 
     from cloudsim.viewer import init_app as init_viewer
 
-    init_viewer(app)
+    init_viewer(app, api)
     return app
 
 

@@ -24,6 +24,7 @@ from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Run, RunState, User
+from cloudsim.viewer.service import live_run_for
 from provisioners.ssh import SSHError
 
 log = logging.getLogger(__name__)
@@ -108,6 +109,25 @@ def store_frame(client: redis.Redis, run_id: int, frame: dict[str, Any], keep: i
     pipe.zremrangebyrank(key, 0, -keep - 1)
     pipe.expire(key, RELAY_LEASE_S * 3)
     pipe.execute()
+
+
+def live_answer(actor: User, run_id: int, after: float, viewer: str, config: Config) -> str:
+    """Return (as JSON text) the live frames newer than `after` for one admitted viewer."""
+    run = live_run_for(actor, run_id)
+    admit(actor, run, viewer, config)
+    ensure_relay(actor, run)
+    frames, events, relay = live_frames(run, after)
+    head = json.dumps(
+        {
+            "events": events,
+            "relay": relay,
+            "score": run.score,
+            "falls": run.falls,
+            "state": run.state.value,
+        }
+    )
+    # the frames are passed on as the relay stored them: no parsing per viewer and poll
+    return head[:-1] + ', "frames": [' + ",".join(frames) + "]}"
 
 
 class _Relay:

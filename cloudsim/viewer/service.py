@@ -119,6 +119,25 @@ def replay_frames(
     return {"start": start, "seconds": seconds, "frames": frames}
 
 
+def scene_answer(actor: User, run_id: int) -> dict[str, Any]:
+    """Return what a viewer loads first: the run, its score marks and its world's shapes."""
+    run, mode = viewable_run(actor, run_id)
+    return {
+        "run": {
+            "id": run.id,
+            "state": run.state.value,
+            "mode": mode,
+            "world": run.task.world,
+            "config": run.task.run_config,
+            "sim_seconds": run.sim_seconds,
+            "score": run.score,
+            "falls": run.falls,
+        },
+        "marks": score_marks(run),
+        "scene": scene_for(run),
+    }
+
+
 def score_marks(run: Run) -> list[dict[str, Any]]:
     """Return the run's score events as timeline marks."""
     return [

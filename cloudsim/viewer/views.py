@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import json
 import math
-from typing import Any
 
 from flask import Blueprint, Response, current_app, jsonify, render_template, request
 from flask.typing import ResponseReturnValue
@@ -49,22 +47,7 @@ def view(run_id: int) -> ResponseReturnValue:
 @bp.route("/runs/<int:run_id>/view/scene")
 @login_required
 def scene(run_id: int) -> ResponseReturnValue:
-    run, mode = service.viewable_run(current_user, run_id)
-    body: dict[str, Any] = {
-        "run": {
-            "id": run.id,
-            "state": run.state.value,
-            "mode": mode,
-            "world": run.task.world,
-            "config": run.task.run_config,
-            "sim_seconds": run.sim_seconds,
-            "score": run.score,
-            "falls": run.falls,
-        },
-        "marks": service.score_marks(run),
-        "scene": service.scene_for(run),
-    }
-    return jsonify(body)
+    return jsonify(service.scene_answer(current_user, run_id))
 
 
 @bp.route("/runs/<int:run_id>/view/frames")
@@ -79,20 +62,6 @@ def frames(run_id: int) -> ResponseReturnValue:
 @login_required
 def live_frames(run_id: int) -> ResponseReturnValue:
     config: Config = current_app.config["CLOUDSIM"]
-    run = service.live_run_for(current_user, run_id)
-    after = _number("after", -1.0)
-    live.admit(current_user, run, request.args.get("viewer", ""), config)
-    live.ensure_relay(current_user, run)
-    frames, events, relay = live.live_frames(run, after)
-    head = json.dumps(
-        {
-            "events": events,
-            "relay": relay,
-            "score": run.score,
-            "falls": run.falls,
-            "state": run.state.value,
-        }
-    )
-    # the frames are passed on as the relay stored them: no parsing per viewer and poll
-    body = head[:-1] + ', "frames": [' + ",".join(frames) + "]}"
+    after, viewer = _number("after", -1.0), request.args.get("viewer", "")
+    body = live.live_answer(current_user, run_id, after, viewer, config)
     return Response(body, mimetype="application/json")

@@ -11,9 +11,10 @@ from flask.testing import FlaskClient
 
 from cloudsim.config import Config
 from cloudsim.extensions import db
-from cloudsim.models import Job, RunState, User
+from cloudsim.models import Job, Role, RunState, User
+from cloudsim.people import service
 from cloudsim.viewer.live import _key, redis_client, store_frame
-from tests.conftest import log_in, running_app
+from tests.conftest import log_in, make_user, running_app, token_for
 from tests.viewer.conftest import store_run
 
 
@@ -80,10 +81,6 @@ def test_live_viewers_are_throttled_capped_and_share_one_relay(
 ) -> None:
     config = make_config(viewer_max_live=2, viewer_poll_ms=60_000)
     with running_app(config) as app:
-        from cloudsim.models import Role
-        from cloudsim.people import service
-        from tests.conftest import make_user
-
         team = service.create_team(None, "Team A")
         officers = [make_user(Role.OFFICER) for _ in range(2)]
         run = store_run(team, run_logs, RunState.RUNNING)
@@ -103,3 +100,27 @@ def test_live_viewers_are_throttled_capped_and_share_one_relay(
         redis_client().delete(_key(run.id, f"poll:{officers[0].id}:tab1"))
         frames = first.get(f"{url}?viewer=tab1&after=1.0").get_json()["frames"]
         assert [f["step"] for f in frames] == [1100]
+
+
+def test_the_api_gives_a_script_the_scene_and_the_replay_frames(
+    app: Flask, people: dict[str, User | None], run_logs: Path
+) -> None:
+    user_a = people["user_a"]
+    assert user_a is not None and user_a.team is not None
+    run = store_run(user_a.team, run_logs)
+    client, headers = app.test_client(), token_for(user_a)
+    scene = client.get(f"/api/v1/runs/{run.id}/view/scene", headers=headers)
+    assert scene.status_code == 200 and scene.json["run"]["mode"] == "replay"
+    robot = str(scene.json["scene"]["roles"]["robot"])
+    frames = client.get(
+        f"/api/v1/runs/{run.id}/view/frames",
+        query_string={"start": 4, "seconds": 2},
+        headers=headers,
+    )
+    assert frames.status_code == 200 and len(frames.json["frames"]) == 66
+    assert len(frames.json["frames"][0]["poses"][robot]) == 7 * 31
+    for bad in ({"seconds": 31}, {"start": -1}, {"start": "soon"}):
+        answer = client.get(f"/api/v1/runs/{run.id}/view/frames", query_string=bad, headers=headers)
+        assert answer.status_code == 400, bad
+    other = client.get(f"/api/v1/runs/{run.id}/view/scene", headers=token_for(people["user_b"]))
+    assert other.status_code == 404
