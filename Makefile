@@ -16,7 +16,7 @@ test: install
 lint: install
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/mypy cloudsim provisioners constellations simulator/drcsim
+	$(BIN)/mypy cloudsim provisioners constellations templates migrations/__init__.py simulator/drcsim router/csrouter
 
 bench: install
 	$(BIN)/python bench/web.py

@@ -22,10 +22,9 @@ from cloudsim.app import create_app  # noqa: E402
 from cloudsim.config import Config  # noqa: E402
 from cloudsim.extensions import db  # noqa: E402
 from cloudsim.fleet import service  # noqa: E402
-from cloudsim.fleet.engine import SIMULATOR_SOURCE  # noqa: E402
 from cloudsim.fleet.providers import open_provider  # noqa: E402
 from cloudsim.models import Job  # noqa: E402
-from constellations.plans.software import build_wheelhouse  # noqa: E402
+from constellations.plans.software import build_wheelhouse, distribution_source  # noqa: E402
 from tests.support.servers import RedisServer  # noqa: E402
 
 
@@ -62,7 +61,9 @@ def main() -> None:
             db.create_all()
             started = time.perf_counter()
             build_wheelhouse(
-                SIMULATOR_SOURCE, instance / "wheelhouse", app.config["CLOUDSIM"].machine_python
+                distribution_source("drcsim"),
+                instance / "wheelhouse",
+                app.config["CLOUDSIM"].machine_python,
             )
             wheelhouse = time.perf_counter() - started
             with start_worker(

@@ -4,28 +4,26 @@ from __future__ import annotations
 
 import logging
 from datetime import timedelta
-from pathlib import Path
 from typing import Any
 
 from flask import Flask
 from sqlalchemy import event
 
+import templates
 from cloudsim.auth.passwords import Passwords
 from cloudsim.config import Config
 from cloudsim.crypto import Keyring
 from cloudsim.extensions import csrf, db, limiter, login_manager
 
-PROJECT_ROOT = Path(__file__).resolve().parent.parent
-WEB_TEMPLATES = PROJECT_ROOT / "templates" / "web"
-
 
 def create_app(config: Config | None = None) -> Flask:
     """Build the CloudSim web app (and its Celery app) from a Config or the environment."""
     config = config or Config.from_env()
+    web_templates = templates.folder("web")
     app = Flask(
         "cloudsim",
-        template_folder=str(WEB_TEMPLATES),
-        static_folder=str(WEB_TEMPLATES / "static"),
+        template_folder=str(web_templates),
+        static_folder=str(web_templates / "static"),
         instance_path=str(config.instance_dir),
     )
     app.config.update(

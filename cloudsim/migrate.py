@@ -1,4 +1,4 @@
-"""Database migrations (Alembic, scripts in migrations/) applied from inside the app."""
+"""Database migrations (Alembic, the `migrations` package's scripts) applied from the app."""
 
 from __future__ import annotations
 
@@ -6,13 +6,13 @@ from alembic import command
 from alembic.config import Config as AlembicConfig
 from flask import Flask
 
-from cloudsim.app import PROJECT_ROOT
+import migrations
 
 
 def alembic_config(app: Flask) -> AlembicConfig:
     """Return an Alembic configuration bound to the app's database."""
     config = AlembicConfig()
-    config.set_main_option("script_location", str(PROJECT_ROOT / "migrations"))
+    config.set_main_option("script_location", str(migrations.folder()))
     config.attributes["flask_app"] = app
     return config
 

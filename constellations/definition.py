@@ -5,14 +5,15 @@ from __future__ import annotations
 import ipaddress
 import re
 from dataclasses import dataclass
-from pathlib import Path
+from importlib import resources
+from importlib.resources.abc import Traversable
 from typing import Any
 
 import yaml
 
 from provisioners.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule, check_role_name
 
-KINDS_DIR = Path(__file__).resolve().parent / "kinds"
+KINDS_DIR: Traversable = resources.files("constellations").joinpath("kinds")
 PUBLIC = "public"  # the outside world, in reachability checks
 _NAME = re.compile(r"[a-z][a-z0-9-]{0,30}\Z")
 
@@ -203,10 +204,10 @@ def parse_kind(data: Any, plans: set[str] | None = None) -> ConstellationKind:
 
 
 def load_kind(
-    name: str, plans: set[str] | None = None, directory: Path = KINDS_DIR
+    name: str, plans: set[str] | None = None, directory: Traversable = KINDS_DIR
 ) -> ConstellationKind:
     """Load and validate the kind called name from its YAML file."""
-    path = directory / f"{name}.yaml"
+    path = directory.joinpath(f"{name}.yaml")
     if not _NAME.match(name) or not path.is_file():
         known = ", ".join(available_kinds(directory))
         raise DefinitionError(f"unknown constellation kind {name!r} (known: {known})")
@@ -220,6 +221,8 @@ def load_kind(
     return kind
 
 
-def available_kinds(directory: Path = KINDS_DIR) -> list[str]:
-    """Return the names of the kinds defined in the directory."""
-    return sorted(p.stem for p in directory.glob("*.yaml"))
+def available_kinds(directory: Traversable = KINDS_DIR) -> list[str]:
+    """Return the names of the kinds defined in the directory (package data by default)."""
+    return sorted(
+        p.name.removesuffix(".yaml") for p in directory.iterdir() if p.name.endswith(".yaml")
+    )

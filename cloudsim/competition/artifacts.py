@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from drcsim import rundir
 from libcloud.storage.base import Container, StorageDriver
 from libcloud.storage.providers import get_driver
 from libcloud.storage.types import ContainerDoesNotExistError, ObjectDoesNotExistError
@@ -50,11 +51,11 @@ def run_dir(run_id: int) -> str:
 
 
 RUN_LOGS = (
-    RemoteLog("score", "sim", "score.jsonl"),
-    RemoteLog("final", "sim", "final.json", required=False),  # absent if the simulator died
-    RemoteLog("meta", "sim", "meta.json"),
-    RemoteLog("commands", "sim", "commands.jsonl"),
-    RemoteLog("state", "sim", "state.msgpack"),
+    RemoteLog("score", "sim", rundir.SCORE),
+    RemoteLog("final", "sim", rundir.FINAL, required=False),  # absent if the simulator died
+    RemoteLog("meta", "sim", rundir.META),
+    RemoteLog("commands", "sim", rundir.COMMANDS),
+    RemoteLog("state", "sim", rundir.STATE),
     RemoteLog("output", "sim", "simulator.log", required=False),
     RemoteLog("bandwidth", "router", "bandwidth.jsonl"),
 )

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from datetime import timedelta
 
 from celery import shared_task
+from csrouter.protocol import payload_bits_used
+from drcsim.rundir import FINAL, SCORE, read_score_log, serve_argv
 from flask import current_app
 from sqlalchemy import select
 
@@ -27,7 +29,6 @@ from cloudsim.competition.artifacts import (
 )
 from cloudsim.competition.plots import read_bandwidth_log
 from cloudsim.competition.runs import request_stop
-from cloudsim.competition.scoring import read_score_log
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError, NotFound
 from cloudsim.extensions import db
@@ -128,19 +129,15 @@ def simulator_command(run: Run, sim_ip: str, allow: list[str]) -> str:
         f"--property=TimeoutStopSec={STOP_TIMEOUT_S}",
         f"--property=StandardOutput=append:{folder}/simulator.log",
         f"--property=StandardError=append:{folder}/simulator.log",
-        DRCSIM,
-        "serve",
-        "--world",
-        task.world,
-        "--config",
-        str(task.run_config),
-        "--bind",
-        sim_ip,
-        *[part for network in allow for part in ("--allow", network)],
-        "--log-dir",
-        folder,
-        "--time-limit",
-        str(task.timeout_s),
+        *serve_argv(
+            DRCSIM,
+            task.world,
+            task.run_config,
+            bind=sim_ip,
+            allow=allow,
+            log_dir=folder,
+            time_limit_s=task.timeout_s,
+        ),
     ]
     return f"mkdir -p {shlex.quote(folder)} && " + " ".join(map(shlex.quote, argv))
 
@@ -191,7 +188,7 @@ def start_run_job(ctx: JobContext) -> None:
 
 def _start_simulator(reach: Machines, run: Run) -> None:
     unit = shlex.quote(unit_name(run.id))
-    final = shlex.quote(f"{run_dir(run.id)}/final.json")
+    final = shlex.quote(f"{run_dir(run.id)}/{FINAL}")
     state = reach.executor.run(
         reach.sim,
         f"systemctl is-active --quiet {unit} && echo active || (test -f {final} && echo ended)"
@@ -271,7 +268,7 @@ def _stop_on_machines(
 
 def score_run(run: Run, store: LogStore) -> None:
     """Set the run's score, falls, time and bits used from its stored logs (again if repeated)."""
-    score = artifact_for(run, "score.jsonl")
+    score = artifact_for(run, SCORE)
     if score is not None:
         result = read_score_log(store.lines(score.location))
         db.session.query(ScoreEvent).filter_by(run_id=run.id).delete()
@@ -353,8 +350,8 @@ def follow(run: Run, config: Config) -> str | None:
     folder = run_dir(run.id)
     unit = shlex.quote(unit_name(run.id))
     command = (
-        f"cat {shlex.quote(folder + '/score.jsonl')} 2>/dev/null; echo '#'; "
-        f"test -f {shlex.quote(folder + '/final.json')} && echo final; "
+        f"cat {shlex.quote(f'{folder}/{SCORE}')} 2>/dev/null; echo '#'; "
+        f"test -f {shlex.quote(f'{folder}/{FINAL}')} && echo final; "
         f"systemctl is-active --quiet {unit} || echo inactive"
     )
     with machines(run, config) as reach:
@@ -372,15 +369,13 @@ def _count_bits(run: Run, reach: Machines) -> None:
     """Show the bits used so far (the bandwidth log gives the final figures at the end)."""
     assert reach.router is not None
     try:
-        counts = router_control.counters(reach.executor, reach.router)
-        uplink = int(counts["uplink"]["accepted"]["payload_bytes"])
-        downlink = int(counts["downlink"]["accepted"]["payload_bytes"])
+        used = payload_bits_used(router_control.counters(reach.executor, reach.router))
     except (CloudSimError, KeyError, TypeError, ValueError) as exc:
         # the run's end is still detected; only the live figure waits for the next beat
         log.warning("run %s: cannot read the router's counters: %s", run.id, exc)
         _router_fault(run, reach)
         return
-    run.uplink_bits_used, run.downlink_bits_used = 8 * uplink, 8 * downlink
+    run.uplink_bits_used, run.downlink_bits_used = used["uplink"], used["downlink"]
     _router_fault(run, reach)
 
 

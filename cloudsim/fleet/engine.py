@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from pathlib import Path
 from typing import Any, TypeVar
 
 from flask import current_app
@@ -29,15 +28,16 @@ from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.models import Constellation, ConstellationState, MachineState, Secret
 from constellations.definition import ConstellationKind, load_kind
 from constellations.plans import PLANS, Action, PlanContext, PlanItem, firewall
-from constellations.plans.router import router_source
-from constellations.plans.software import build_source_bundle, build_wheelhouse
+from constellations.plans.software import (
+    build_source_bundle,
+    build_wheelhouse,
+    distribution_source,
+)
 from provisioners.operations import apply
 from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
 from provisioners.ssh import Machine as Target
 
 T = TypeVar("T")
-PROJECT_ROOT = Path(__file__).resolve().parents[2]
-SIMULATOR_SOURCE = PROJECT_ROOT / "simulator"
 NEEDS_WHEELHOUSE = {"simulator", "field_computer"}
 BOOTING = (NodeState.PENDING, NodeState.STARTING, NodeState.REBOOTING)
 
@@ -130,14 +130,16 @@ def _with_software(
     used = {plan for machine in kind.machines for plan in machine.plan}
     if used & NEEDS_WHEELHOUSE:
         ctx.log("building the simulator's wheelhouse (cached after the first time)")
-        wheelhouse = build_wheelhouse(SIMULATOR_SOURCE, cache, config.machine_python)
+        wheelhouse = build_wheelhouse(distribution_source("drcsim"), cache, config.machine_python)
         contexts = {n: replace(c, wheelhouse=wheelhouse) for n, c in contexts.items()}
     if "cloudsim_server" in used:
         ctx.log("bundling CloudSim's source and wheels (cached after the first time)")
         password = instance_admin_password(constellation)
         ctx.mask(password)
         executor.add_secret(password)
-        bundle = build_source_bundle(PROJECT_ROOT, cache, config.machine_python)
+        members = [distribution_source("drcsim"), distribution_source("cloudsim-router")]
+        root = distribution_source("cloudsim")
+        bundle = build_source_bundle(root, cache, config.machine_python, members)
         secrets = {"cloudsim_admin_password": password}
         contexts = {n: replace(c, app_bundle=bundle, secrets=secrets) for n, c in contexts.items()}
     if "router" in used:
@@ -145,7 +147,9 @@ def _with_software(
         material = server_material(constellation)
         ctx.mask(material.server_key)
         executor.add_secret(material.server_key)
-        router_wheels = build_wheelhouse(router_source(), cache, config.machine_python)
+        router_wheels = build_wheelhouse(
+            distribution_source("cloudsim-router"), cache, config.machine_python
+        )
         contexts = {
             n: replace(c, vpn=material, router_wheelhouse=router_wheels)
             if "router" in c.machine.plan

@@ -1,7 +1,8 @@
 """Control a constellation's router over SSH: arm a run's limits, read counters, disarm, logs.
 
 These run `csrouter` on the router (the daemon the router's deploy plan installs: the VPN
-path's added latency, per-direction accounting, bit caps and the bandwidth log).
+path's added latency, per-direction accounting, bit caps and the bandwidth log); its
+commands, exit codes and counters schema are csrouter's own (csrouter.protocol).
 """
 
 from __future__ import annotations
@@ -11,14 +12,15 @@ import shlex
 from dataclasses import dataclass
 from typing import Any
 
+from csrouter import protocol
+
 from cloudsim.errors import CloudSimError
 from constellations.plans.router import CSROUTER_COMMAND
 from provisioners.ssh import Machine as Target
 from provisioners.ssh import SSHError, SSHExecutor
 
-BANDWIDTH_LOG = "/var/log/cloudsim/bandwidth.log"
+BANDWIDTH_LOG = protocol.BANDWIDTH_LOG
 CONTROL_TIMEOUT = 30
-DAEMON_DOWN, FAULTS = 3, 4  # csrouter's exit codes (router/README.md)
 
 
 class RouterError(CloudSimError):
@@ -34,8 +36,10 @@ class Limits:
     downlink_bits: int
 
     def __post_init__(self) -> None:
-        if not 0 <= self.latency_ms <= 2000:
-            raise ValueError(f"latency_ms must be between 0 and 2000, got {self.latency_ms}")
+        if not 0 <= self.latency_ms <= protocol.MAX_LATENCY_MS:
+            raise ValueError(
+                f"latency_ms must be between 0 and {protocol.MAX_LATENCY_MS}, got {self.latency_ms}"
+            )
         if self.uplink_bits < 0 or self.downlink_bits < 0:
             raise ValueError("caps must not be negative")
 
@@ -50,24 +54,13 @@ def _csrouter(executor: SSHExecutor, router: Target, *args: str) -> str:
 
 def arm(executor: SSHExecutor, router: Target, limits: Limits, run_id: str) -> None:
     """Set the run's latency and caps, zero the counters, start a new bandwidth log."""
-    _csrouter(
-        executor,
-        router,
-        "arm",
-        "--latency-ms",
-        str(limits.latency_ms),
-        "--uplink-bits",
-        str(limits.uplink_bits),
-        "--downlink-bits",
-        str(limits.downlink_bits),
-        "--run-id",
-        run_id,
-    )
+    args = protocol.arm_args(limits.latency_ms, limits.uplink_bits, limits.downlink_bits, run_id)
+    _csrouter(executor, router, *args)
 
 
 def counters(executor: SSHExecutor, router: Target) -> dict[str, Any]:
-    """Return the router's counters (per direction: bytes, payload bytes, cap left)."""
-    output = _csrouter(executor, router, "counters", "--json")
+    """Return the router's counters (csrouter.protocol describes them)."""
+    output = _csrouter(executor, router, protocol.COUNTERS, "--json")
     try:
         return dict(json.loads(output))
     except ValueError as exc:
@@ -76,14 +69,14 @@ def counters(executor: SSHExecutor, router: Target) -> dict[str, Any]:
 
 def status(executor: SSHExecutor, router: Target) -> dict[str, Any]:
     """Return the daemon's status (with its faults, if any); RouterError when it is down."""
-    command = f"{CSROUTER_COMMAND} status --json"
+    command = f"{CSROUTER_COMMAND} {protocol.STATUS} --json"
     try:
         result = executor.run(router, command, timeout=CONTROL_TIMEOUT, check=False)
     except SSHError as exc:
         raise RouterError(f"router: status failed: {exc}") from exc
-    if result.exit_code == DAEMON_DOWN:
+    if result.exit_code == protocol.EXIT_DAEMON_DOWN:
         raise RouterError(f"router: csrouter is down: {result.stdout.strip()}")
-    if result.exit_code not in (0, FAULTS):
+    if result.exit_code not in (protocol.EXIT_OK, protocol.EXIT_UNHEALTHY):
         raise RouterError(f"router: status failed (exit {result.exit_code}): {result.stderr}")
     try:
         return dict(json.loads(result.stdout))
@@ -93,4 +86,4 @@ def status(executor: SSHExecutor, router: Target) -> dict[str, Any]:
 
 def disarm(executor: SSHExecutor, router: Target) -> None:
     """End the run on the router: caps and counters stop (traffic stays delayed)."""
-    _csrouter(executor, router, "disarm")
+    _csrouter(executor, router, protocol.DISARM)

@@ -9,7 +9,6 @@ from __future__ import annotations
 import ipaddress
 import shlex
 from collections.abc import Sequence
-from pathlib import Path
 
 from constellations.plans.base import Action, PlanContext, PlanItem, VpnMaterial
 from constellations.plans.software import install_wheelhouse
@@ -203,8 +202,3 @@ def _restart_on_change(name: str, steps: Sequence[PlanItem], unit: str) -> Actio
         return changed
 
     return Action(name, run)
-
-
-def router_source() -> Path:
-    """Return the source tree of the cloudsim-router distribution (for build_wheelhouse)."""
-    return Path(__file__).resolve().parents[2] / "router"

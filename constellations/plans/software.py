@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import shlex
 import shutil
 import subprocess
 import tarfile
 import tempfile
+import tomllib
 from collections.abc import Sequence
+from importlib import metadata
 from pathlib import Path
+from urllib.parse import urlsplit
+from urllib.request import url2pathname
 
 from constellations.plans.base import Action
 from provisioners.ssh import Machine as Target
@@ -17,12 +22,33 @@ from provisioners.ssh import SSHExecutor
 
 SUMS = "SHA256SUMS"
 SOURCE_TARBALL = "cloudsim-source.tar.gz"
+EDITABLES = "EDITABLES"  # the bundle's distributions installed from its source, one folder a line
 REMOTE_ROOT = "/opt/cloudsim/wheelhouse"
 _SKIP = {"__pycache__", ".egg-info", "build", "dist", ".pytest_cache"}
 
 
 class WheelhouseError(Exception):
     """The wheelhouse could not be built."""
+
+
+def distribution_source(name: str) -> Path:
+    """Return the source folder an installed distribution came from (pip's direct_url.json).
+
+    Wheels for the machines are built from it; `make install` installs CloudSim, drcsim and
+    cloudsim-router from this checkout, so each has one.
+    """
+    try:
+        recorded = metadata.distribution(name).read_text("direct_url.json") or "{}"
+    except metadata.PackageNotFoundError:
+        raise WheelhouseError(f"{name} is not installed") from None
+    url = urlsplit(str(json.loads(recorded).get("url", "")))
+    folder = Path(url2pathname(url.path))
+    if url.scheme != "file" or not folder.is_dir():
+        raise WheelhouseError(
+            f"{name} was not installed from a source folder, so its wheels cannot be built "
+            "for the machines (install it with `pip install -e FOLDER` or `pip install FOLDER`)"
+        )
+    return folder
 
 
 def _source_digest(source: Path) -> str:
@@ -149,16 +175,23 @@ def install_wheelhouse(
     )
 
 
-def build_source_bundle(root: Path, cache_dir: Path, python: str) -> Path:
+def build_source_bundle(
+    root: Path, cache_dir: Path, python: str, members: Sequence[Path] = ()
+) -> Path:
     """Return a folder with a tarball of CloudSim's tracked source files and a wheelhouse of
-    everything it needs to run (plus the build tools for an offline editable install)."""
+    everything it needs to run (plus the build tools for an offline editable install).
+
+    `members` are distributions CloudSim needs whose sources lie inside root (the simulator,
+    the router): they are installed from the source too, editable, like CloudSim.
+    """
+    editables = [".", *(str(member.relative_to(root)) for member in members)]
     files = subprocess.run(
         ["git", "-C", str(root), "ls-files", "-z"], capture_output=True, check=False
     )
     if files.returncode != 0:
         raise WheelhouseError(f"{root} is not a git checkout: cannot bundle CloudSim's source")
     names = sorted(name for name in files.stdout.decode().split("\0") if name)
-    digest = hashlib.sha256()
+    digest = hashlib.sha256("\n".join(editables).encode())
     for name in names:
         path = root / name
         if path.is_file():
@@ -174,7 +207,7 @@ def build_source_bundle(root: Path, cache_dir: Path, python: str) -> Path:
                 if (root / name).is_file():
                     tar.add(root / name, arcname=name)
         for argv in (
-            ["wheel", "--wheel-dir", scratch, str(root)],
+            ["wheel", "--wheel-dir", scratch, *(str(root / folder) for folder in editables)],
             ["download", "--no-deps", "--dest", scratch, "setuptools>=68", "wheel"],
         ):
             result = subprocess.run(
@@ -185,8 +218,11 @@ def build_source_bundle(root: Path, cache_dir: Path, python: str) -> Path:
             )
             if result.returncode != 0:
                 raise WheelhouseError(f"pip {argv[0]} failed: {result.stderr.strip()[-2000:]}")
-        for built in Path(scratch).glob("cloudsim-*.whl"):
-            built.unlink()  # CloudSim itself is installed from the source, in editable mode
+        built = {_distribution(wheel.name): wheel for wheel in Path(scratch).glob("*.whl")}
+        for folder in editables:
+            # installed from the source, in editable mode: their own wheels are not needed
+            built[_project_name(root / folder)].unlink()
+        (Path(scratch) / EDITABLES).write_text("".join(f"{folder}\n" for folder in editables))
         sums = "".join(f"{_file_sha256(p)}  {p.name}\n" for p in sorted(Path(scratch).iterdir()))
         (Path(scratch) / SUMS).write_text(sums)
         shutil.rmtree(target, ignore_errors=True)
@@ -194,15 +230,26 @@ def build_source_bundle(root: Path, cache_dir: Path, python: str) -> Path:
     return target
 
 
+def _project_name(source: Path) -> str:
+    """Return the normalised distribution name declared in a source folder's pyproject.toml."""
+    with (source / "pyproject.toml").open("rb") as handle:
+        name = str(tomllib.load(handle)["project"]["name"])
+    return name.lower().replace("_", "-")
+
+
 def install_source_bundle(bundle: Path, root: str, venv: str) -> Action:
     """Upload CloudSim's source and wheels; unpack and install it (editable) into venv, offline."""
     q_root = shlex.quote(root)
+    editables = " ".join(
+        f"-e {shlex.quote(f'{root}/{folder}'.removesuffix('/.'))}"
+        for folder in (bundle / EDITABLES).read_text().split()
+    )
     return _offline_install(
         bundle,
         venv,
         f"install CloudSim from {bundle.name} into {venv}",
         f"rm -rf {q_root} && mkdir -p {q_root} && tar -xzf {{remote}}/{SOURCE_TARBALL} "
-        f"-C {q_root} && {_pip_into(venv)} --no-index --find-links {{remote}} -e {q_root}",
+        f"-C {q_root} && {_pip_into(venv)} --no-index --find-links {{remote}} {editables}",
     )
 
 

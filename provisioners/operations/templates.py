@@ -8,19 +8,17 @@ from pathlib import Path
 
 import jinja2
 
+import templates
 from provisioners.operations.errors import TemplateError
-
-#: templates/machines/ of this source tree; deployments may point elsewhere
-DEFAULT_TEMPLATES_DIR = Path(__file__).resolve().parents[2] / "templates" / "machines"
 
 
 class MachineTemplates:
     """The templates pushed to machines, rendered locally before upload."""
 
-    def __init__(self, directory: Path = DEFAULT_TEMPLATES_DIR) -> None:
-        self.directory = directory
+    def __init__(self, directory: Path | None = None) -> None:
+        self.directory = directory or templates.folder("machines")
         self._environment = jinja2.Environment(
-            loader=jinja2.FileSystemLoader(directory),
+            loader=jinja2.FileSystemLoader(self.directory),
             undefined=jinja2.StrictUndefined,
             keep_trailing_newline=True,
             trim_blocks=True,

@@ -1,7 +1,7 @@
 """The csrouter command: `serve` (the daemon) and the orchestrator's control commands.
 
-Exit status: 0 done (status: healthy), 1 refused or failed, 3 the daemon does not answer,
-4 status: the daemon runs but reports faults.
+Exit status (csrouter.protocol): 0 done (status: healthy), 1 refused or failed, 3 the daemon
+does not answer, 4 status: the daemon runs but reports faults.
 """
 
 from __future__ import annotations
@@ -17,10 +17,16 @@ from csrouter import __version__
 from csrouter.config import DEFAULT_CONFIG_PATH, MAX_LATENCY_MS, RouterConfig, load_config
 from csrouter.control import request
 from csrouter.errors import ConfigError, DaemonUnavailable, RouterError
-
-EXIT_FAILED = 1
-EXIT_DAEMON_DOWN = 3
-EXIT_UNHEALTHY = 4
+from csrouter.protocol import (
+    ARM,
+    COUNTERS,
+    DISARM,
+    EXIT_DAEMON_DOWN,
+    EXIT_FAILED,
+    EXIT_UNHEALTHY,
+    LOG_PATH,
+    STATUS,
+)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -33,12 +39,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
             return serve(config)
-        if args.command == "log-path":
+        if args.command == LOG_PATH:
             print(config.bandwidth_log)
             return 0
         return _control(args, config)
     except DaemonUnavailable as exc:
-        if getattr(args, "json", False) and args.command == "status":
+        if getattr(args, "json", False) and args.command == STATUS:
             print(json.dumps({"daemon": "down", "healthy": False, "error": str(exc)}))
         print(f"csrouter: {exc}", file=sys.stderr)
         return EXIT_DAEMON_DOWN
@@ -49,7 +55,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _control(args: argparse.Namespace, config: RouterConfig) -> int:
     message: dict[str, Any] = {"op": args.command}
-    if args.command == "arm":
+    if args.command == ARM:
         message.update(
             latency_ms=args.latency_ms,
             uplink_bits=args.uplink_bits,
@@ -61,7 +67,7 @@ def _control(args: argparse.Namespace, config: RouterConfig) -> int:
         print(json.dumps(answer, indent=2, sort_keys=True))
     else:
         _print_text(answer)
-    if args.command == "status" and not answer.get("healthy", False):
+    if args.command == STATUS and not answer.get("healthy", False):
         return EXIT_UNHEALTHY
     return 0
 
@@ -95,20 +101,20 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--config", default=DEFAULT_CONFIG_PATH, help="configuration file")
     commands = parser.add_subparsers(dest="command", required=True)
     commands.add_parser("serve", help="run the daemon (under systemd)")
-    arm = commands.add_parser("arm", help="start a run: latency, caps, counters to zero")
+    arm = commands.add_parser(ARM, help="start a run: latency, caps, counters to zero")
     arm.add_argument("--latency-ms", type=_latency, required=True)
     arm.add_argument("--uplink-bits", type=_non_negative, help="cap OCU->LAN (default: none)")
     arm.add_argument("--downlink-bits", type=_non_negative, help="cap LAN->OCU (default: none)")
     arm.add_argument("--run-id", help="the orchestrator's name for the run")
     for name, text in (
-        ("disarm", "end the run: lift the caps, print the final counters"),
-        ("counters", "print the run's counters"),
-        ("status", "print the daemon's health (exit 3: down, 4: faults)"),
+        (DISARM, "end the run: lift the caps, print the final counters"),
+        (COUNTERS, "print the run's counters"),
+        (STATUS, "print the daemon's health (exit 3: down, 4: faults)"),
     ):
         commands.add_parser(name, help=text)
     for sub in commands.choices.values():
         sub.add_argument("--json", action="store_true", help="print JSON")
-    commands.add_parser("log-path", help="print the bandwidth log's path")
+    commands.add_parser(LOG_PATH, help="print the bandwidth log's path")
     return parser
 
 

@@ -19,6 +19,7 @@ from csrouter.control import ControlServer
 from csrouter.errors import ConfigError
 from csrouter.ocu_path import OcuPath
 from csrouter.packets import HEADER_COPY_BYTES
+from csrouter.protocol import ARM, COUNTERS, DISARM, STATUS
 from csrouter.rules import ensure_rules
 from csrouter.run import DOWNLINK, UPLINK
 
@@ -110,18 +111,18 @@ def _stop(path: OcuPath) -> Callable[[int, FrameType | None], None]:
 def _handler(path: OcuPath) -> Callable[[dict[str, Any]], dict[str, Any]]:
     def handle(request: dict[str, Any]) -> dict[str, Any]:
         op = request.get("op")
-        if op == "arm":
+        if op == ARM:
             return path.arm(
                 check_latency(request["latency_ms"]),
                 check_cap("uplink_bits", request.get("uplink_bits")),
                 check_cap("downlink_bits", request.get("downlink_bits")),
                 _run_id(request.get("run_id")),
             )
-        if op == "disarm":
+        if op == DISARM:
             return path.disarm()
-        if op == "counters":
+        if op == COUNTERS:
             return path.counters()
-        if op == "status":
+        if op == STATUS:
             return path.status()
         raise ConfigError(f"unknown request {op!r}")
 

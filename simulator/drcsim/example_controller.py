@@ -11,13 +11,11 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from drcsim.client import SimClient
+from drcsim.commands import CommandAPI
 from drcsim.errors import ClientError
-
-if TYPE_CHECKING:
-    from drcsim.local import LocalClient
 
 Log = Callable[[str], None]
 # Offsets (m) tried in turn around a roughly known position until the hand finds the object.
@@ -31,11 +29,9 @@ def _yaw(orientation: list[float]) -> float:
 
 
 class ExampleController:
-    """Runs one task to completion (or as far as it gets) over a SimClient."""
+    """Runs one task to completion (or as far as it gets) over a SimClient or a LocalClient."""
 
-    def __init__(
-        self, client: SimClient | LocalClient, log: Log = lambda _: None, timeout_s: float = 600.0
-    ):
+    def __init__(self, client: CommandAPI, log: Log = lambda _: None, timeout_s: float = 600.0):
         self.client = client
         self.log = log
         self.info = client.hello()

@@ -8,7 +8,8 @@ from typing import Any
 
 from drcsim.engine import RunOptions, Simulation
 from drcsim.errors import ReplayMismatch
-from drcsim.runlog import read_commands, read_final, read_meta, read_states, state_digest
+from drcsim.rundir import read_final, read_meta
+from drcsim.runlog import read_commands, read_states, state_digest
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,7 @@
-"""A run's logs: metadata with the seed, command log, 100 Hz state log, score log, final state."""
+"""A run's logs: metadata with the seed, command log, 100 Hz state log, score log, final state.
+
+The file names and the readers an orchestrator needs are in drcsim.rundir.
+"""
 
 from __future__ import annotations
 
@@ -11,11 +14,7 @@ from typing import IO, Any
 
 import msgpack
 
-META = "meta.json"
-COMMANDS = "commands.jsonl"
-STATE = "state.msgpack"
-SCORE = "score.jsonl"
-FINAL = "final.json"
+from drcsim.rundir import COMMANDS, FINAL, META, SCORE, STATE
 
 
 def state_digest(vector: list[float]) -> str:
@@ -63,18 +62,6 @@ class RunLog:
         (self.directory / FINAL).write_text(json.dumps(final, indent=2, sort_keys=True) + "\n")
         for handle in (self._commands, self._state, self._score):
             handle.close()
-
-
-def read_meta(directory: Path) -> dict[str, Any]:
-    """Return a run's metadata."""
-    data: dict[str, Any] = json.loads((directory / META).read_text())
-    return data
-
-
-def read_final(directory: Path) -> dict[str, Any]:
-    """Return a run's final record."""
-    data: dict[str, Any] = json.loads((directory / FINAL).read_text())
-    return data
 
 
 def read_commands(directory: Path) -> Iterator[tuple[int, dict[str, Any]]]:

@@ -45,9 +45,9 @@ def test_help_lists_the_commands() -> None:
 def test_db_current_and_downgrade(run: Callable[..., Result]) -> None:
     from alembic.script import ScriptDirectory
 
-    from cloudsim.app import PROJECT_ROOT
+    import migrations
 
-    head = ScriptDirectory(str(PROJECT_ROOT / "migrations")).get_current_head()
+    head = ScriptDirectory(str(migrations.folder())).get_current_head()
     assert run("db", "current").output.strip() == head
     assert "base" in run("db", "downgrade", "base").output
     assert "empty database" in run("db", "current").output

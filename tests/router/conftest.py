@@ -24,8 +24,8 @@ from libcloud.compute.base import Node, NodeAuthSSHKey
 from constellations.definition import load_kind
 from constellations.plans import PLANS, PlanContext, PlanItem, firewall
 from constellations.plans.base import Action, VpnMaterial
-from constellations.plans.router import VPN_SERVER_NAME, router, router_source
-from constellations.plans.software import build_wheelhouse
+from constellations.plans.router import VPN_SERVER_NAME, router
+from constellations.plans.software import build_wheelhouse, distribution_source
 from provisioners import pki
 from provisioners.local.driver import LocalNodeDriver
 from provisioners.operations import MachineTemplates, apply
@@ -246,7 +246,9 @@ def _build_lab(driver: LocalNodeDriver, executor: SSHExecutor, scratch: Path) ->
     home = driver.ex_create_network(f"{PREFIX}-home")
     private, public = _ssh_key()
     auth = NodeAuthSSHKey(public)
-    wheelhouse = build_wheelhouse(router_source(), scratch / "wheelhouse", sys.executable)
+    wheelhouse = build_wheelhouse(
+        distribution_source("cloudsim-router"), scratch / "wheelhouse", sys.executable
+    )
     nodes = {
         "router": driver.create_node(
             f"{PREFIX}-router", auth=auth, ex_network=lan, ex_private_ip=router_ip, ex_public=True

@@ -39,6 +39,30 @@ def _load_raw(name: str) -> dict[str, Any]:
     return data
 
 
+@dataclass(frozen=True)
+class WorldSummary:
+    """What an orchestrator schedules: a world's title, run configurations and checkpoints."""
+
+    name: str
+    title: str
+    configs: tuple[int, ...]
+    checkpoints: tuple[str, ...]
+
+
+def world_summaries() -> dict[str, WorldSummary]:
+    """Return every world by name, summarised (no physics is loaded)."""
+    found: dict[str, WorldSummary] = {}
+    for name in WORLD_NAMES:
+        raw = _load_raw(name)
+        found[name] = WorldSummary(
+            name=name,
+            title=raw.get("title", name),
+            configs=tuple(sorted(int(c) for c in raw["configs"])),
+            checkpoints=tuple(c["name"] for c in raw["checkpoints"]),
+        )
+    return found
+
+
 def _by_id(items: list[dict[str, Any]], overrides: dict[str, dict[str, Any]], kind: str) -> dict:
     resolved = {item["id"]: copy.deepcopy(item) for item in items}
     for item_id, override in overrides.items():
