@@ -34,7 +34,8 @@ sys.path.insert(0, str(PROJECT))
 
 from drcsim.engine import RunOptions, Simulation  # noqa: E402
 from drcsim.protocol import encode  # noqa: E402
-from drcsim.runlog import META, STATE, read_states  # noqa: E402
+from drcsim.rundir import META, STATE  # noqa: E402
+from drcsim.runlog import read_states  # noqa: E402
 
 from bench.web import free_port  # noqa: E402
 from cloudsim import migrate  # noqa: E402

@@ -9,6 +9,7 @@ from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
+from drcsim import rundir
 from drcsim.viewer import StateLogPoses, world_scene
 
 from cloudsim.competition.artifacts import LogStore, artifact_for
@@ -20,7 +21,7 @@ from cloudsim.models import Role, Run, RunState, User
 REPLAY_EVERY = 3  # every third 100 Hz state record: 33 frames per simulated second
 MAX_CHUNK_SECONDS = 30.0
 OPEN_REPLAYS = 4  # state logs kept open (a built world each) per web process
-REPLAY_LOGS = ("meta.json", "state.msgpack")
+REPLAY_LOGS = (rundir.META, rundir.STATE)
 LIVE_IS_FOR_OFFICERS = (
     "a live run is shown in 3D to officers only; your team can replay it when it has ended"
 )

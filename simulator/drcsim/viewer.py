@@ -166,7 +166,7 @@ class StateLogPoses:
 
     def __init__(self, log_dir: Path) -> None:
         from drcsim.engine import RunOptions, Simulation
-        from drcsim.runlog import read_meta
+        from drcsim.rundir import read_meta
 
         meta = read_meta(log_dir)
         self.log_dir = log_dir
@@ -203,7 +203,7 @@ class StateLogPoses:
 
         import msgpack
 
-        from drcsim.runlog import STATE
+        from drcsim.rundir import STATE
 
         period = every * TICK_STEPS
         offset = max((o for t, o in self._marks if t <= start), default=0)
