@@ -284,9 +284,9 @@ def main() -> None:
         deadline = time.monotonic() + 60
         while True:
             try:
-                requests.get(f"{base}/login", timeout=2)
+                requests.get(f"{base}/login", timeout=10)
                 break
-            except requests.ConnectionError:
+            except requests.RequestException:  # not listening yet, or still importing
                 if time.monotonic() > deadline:
                     raise
                 time.sleep(0.2)
