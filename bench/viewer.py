@@ -41,11 +41,11 @@ from bench.web import free_port  # noqa: E402
 from cloudsim import migrate  # noqa: E402
 from cloudsim.app import create_app  # noqa: E402
 from cloudsim.auth.passwords import hash_password  # noqa: E402
-from cloudsim.competition.artifacts import LogStore, file_sha256  # noqa: E402
 from cloudsim.config import Config  # noqa: E402
 from cloudsim.extensions import db  # noqa: E402
-from cloudsim.models import Artifact, Role, Run, RunState, Task, Team, User, utcnow  # noqa: E402
+from cloudsim.models import Role, Run, RunState, Task, Team, User, utcnow  # noqa: E402
 from cloudsim.viewer.live import store_frame  # noqa: E402
+from tests.competition.support import store_log  # noqa: E402
 from tests.support.servers import RedisServer  # noqa: E402
 
 PASSWORD = "benchmark password"
@@ -129,21 +129,8 @@ def seed(env: dict[str, str], logs: Path, minutes: float) -> tuple[int, int]:
         live = Run(task_id=task.id, team_id=team.id, state=RunState.RUNNING)
         db.session.add_all([finished, live])
         db.session.flush()
-        store = LogStore(app.config["CLOUDSIM"])
         for filename in (META, STATE):
-            name = store.object_name(finished.id, filename)
-            store.put(logs / filename, name)
-            path = logs / filename
-            db.session.add(
-                Artifact(
-                    run_id=finished.id,
-                    kind=filename.split(".")[0],
-                    filename=filename,
-                    location=name,
-                    size=path.stat().st_size,
-                    sha256=file_sha256(path),
-                )
-            )
+            store_log(finished, logs / filename, filename)
         db.session.commit()
         return finished.id, live.id
 
@@ -213,6 +200,7 @@ def poll_viewers(base: str, path: str, count: int, seconds: float) -> dict[str, 
     sessions = [log_in(base) for _ in range(count)]
     latencies: list[float] = []
     received = {"bytes": 0, "errors": 0}
+    codes: dict[int, int] = {}
     lock = threading.Lock()
     deadline = time.monotonic() + seconds
 
@@ -228,6 +216,7 @@ def poll_viewers(base: str, path: str, count: int, seconds: float) -> dict[str, 
                 latencies.append(took)
                 received["bytes"] += len(response.content)
                 received["errors"] += response.status_code != 200
+                codes[response.status_code] = codes.get(response.status_code, 0) + 1
             if response.ok and "frames" in (body := response.json()) and body["frames"]:
                 newest = body["frames"][-1]["t"]
             time.sleep(max(0.0, POLL_S - took))
@@ -245,6 +234,7 @@ def poll_viewers(base: str, path: str, count: int, seconds: float) -> dict[str, 
         "p95_ms": 1000 * latencies[int(0.95 * (len(latencies) - 1))],
         "bytes_per_s": received["bytes"] / seconds,
         "errors": received["errors"],
+        "codes": codes,
     }
 
 
@@ -321,6 +311,8 @@ def main() -> None:
                 f"{viewers:7d}  {got['rate']:7.1f} ({got['wanted']:5.1f})  {got['p50_ms']:6.1f}  "
                 f"{got['p95_ms']:6.1f}  {got['errors']:6d} | {ref['p95_ms']:6.1f}"
             )
+            if got["errors"]:
+                print(f"         answers: {got['codes']}")
         feeder.stop.set()
     finally:
         if gunicorn is not None:

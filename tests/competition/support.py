@@ -64,21 +64,26 @@ def finished_run(task: Task, constellation_id: int | None, tmp: Path, score: int
     db.session.flush()
     path = tmp / f"score-{run.id}.jsonl"
     path.write_text(SCORE_LOG)
-    store = LogStore(current_app.config["CLOUDSIM"])
-    name = store.object_name(run.id, "score.jsonl")
-    store.put(path, name)
-    db.session.add(
-        Artifact(
-            run_id=run.id,
-            kind="score",
-            filename="score.jsonl",
-            location=name,
-            size=path.stat().st_size,
-            sha256=file_sha256(path),
-        )
-    )
+    store_log(run, path, "score.jsonl")
     db.session.commit()
     return run
+
+
+def store_log(run: Run, path: Path, filename: str) -> Artifact:
+    """Put a file into the log store as one of the run's logs (the caller commits)."""
+    store = LogStore(current_app.config["CLOUDSIM"])
+    name = store.object_name(run.id, filename)
+    store.put(path, name)
+    artifact = Artifact(
+        run_id=run.id,
+        kind=filename.split(".")[0],
+        filename=filename,
+        location=name,
+        size=path.stat().st_size,
+        sha256=file_sha256(path),
+    )
+    db.session.add(artifact)
+    return artifact
 
 
 def ready_constellation(constellation_id: int) -> None:

@@ -10,11 +10,11 @@ from drcsim.engine import RunOptions, Simulation
 from drcsim.runlog import read_states
 from flask import current_app
 
-from cloudsim.competition.artifacts import LogStore, file_sha256
+from cloudsim.competition.artifacts import LogStore
 from cloudsim.competition.engine import score_run
 from cloudsim.extensions import db
-from cloudsim.models import Artifact, Run, RunState, Team, utcnow
-from tests.competition.support import open_task
+from cloudsim.models import Run, RunState, Team, utcnow
+from tests.competition.support import open_task, store_log
 
 RUN_S = 9.0  # simulated: the robot walks through gate_1 (x = 4 m) at about 5 s
 LOGS = ("meta.json", "state.msgpack", "score.jsonl", "commands.jsonl", "final.json")
@@ -38,23 +38,10 @@ def store_run(team: Team, folder: Path, state: RunState = RunState.FINISHED) -> 
     run = Run(task_id=task.id, team_id=team.id, state=state, finished_at=utcnow())
     db.session.add(run)
     db.session.flush()
-    store = LogStore(current_app.config["CLOUDSIM"])
     for filename in LOGS:
-        name = store.object_name(run.id, filename)
-        store.put(folder / filename, name)
-        path = folder / filename
-        db.session.add(
-            Artifact(
-                run_id=run.id,
-                kind=filename.split(".")[0],
-                filename=filename,
-                location=name,
-                size=path.stat().st_size,
-                sha256=file_sha256(path),
-            )
-        )
+        store_log(run, folder / filename, filename)
     db.session.commit()
-    score_run(run, store)
+    score_run(run, LogStore(current_app.config["CLOUDSIM"]))
     run.state = state
     db.session.commit()
     return run

@@ -10,15 +10,14 @@ from urllib.parse import urlsplit
 
 import pytest
 from drcsim.viewer import world_scene
-from flask import Flask, current_app
-from playwright.sync_api import Browser, Page, expect, sync_playwright
+from flask import Flask
+from playwright.sync_api import Browser, expect
 
-from cloudsim.competition.artifacts import LogStore, file_sha256
 from cloudsim.extensions import db
-from cloudsim.models import Artifact, Run, User
-from tests.conftest import PASSWORD
+from cloudsim.models import Run, User
+from tests.competition.support import store_log
 from tests.viewer.conftest import logged_pelvis, store_run
-from tests.web.test_browser import CHROMIUM, WEBGL_ARGS, live_url  # noqa: F401
+from tests.web.test_browser import live_url, log_in_page, webgl_chromium  # noqa: F401
 
 pytestmark = pytest.mark.browser
 ARTIFACTS = Path(os.environ.get("CLOUDSIM_TEST_ARTIFACTS", "build/test-artifacts"))
@@ -26,17 +25,8 @@ ARTIFACTS = Path(os.environ.get("CLOUDSIM_TEST_ARTIFACTS", "build/test-artifacts
 
 @pytest.fixture(scope="module")
 def webgl_browser() -> Iterator[Browser]:
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=WEBGL_ARGS)
+    with webgl_chromium() as browser:
         yield browser
-        browser.close()
-
-
-def _log_in(page: Page, base: str, user: User) -> None:
-    page.goto(f"{base}/login")
-    page.get_by_label("E-mail").fill(user.email)
-    page.get_by_label("Password").fill(PASSWORD)
-    page.get_by_role("button", name="Log in").click()
 
 
 def _add_bandwidth_log(run: Run, tmp_path: Path) -> None:
@@ -46,19 +36,7 @@ def _add_bandwidth_log(run: Run, tmp_path: Path) -> None:
             lines.append({"direction": direction, "second": second, "bytes": 1000 * second})
     path = tmp_path / "bandwidth.jsonl"
     path.write_text("".join(json.dumps(line) + "\n" for line in lines))
-    store = LogStore(current_app.config["CLOUDSIM"])
-    name = store.object_name(run.id, "bandwidth.jsonl")
-    store.put(path, name)
-    db.session.add(
-        Artifact(
-            run_id=run.id,
-            kind="bandwidth",
-            filename="bandwidth.jsonl",
-            location=name,
-            size=path.stat().st_size,
-            sha256=file_sha256(path),
-        )
-    )
+    store_log(run, path, "bandwidth.jsonl")
     db.session.commit()
 
 
@@ -77,7 +55,7 @@ def test_a_team_replays_its_run_where_the_state_log_says(
     page = webgl_browser.new_context(viewport={"width": 1280, "height": 1000}).new_page()
     hosts: set[str] = set()
     page.on("request", lambda request: hosts.add(urlsplit(request.url).netloc))
-    _log_in(page, live_url, user)
+    log_in_page(page, live_url, user)
     page.goto(f"{live_url}/runs/{run.id}")
     page.get_by_role("link", name="Replay in 3D").click()
     page.wait_for_function("window.cloudsimViewer && window.cloudsimViewer.ready", timeout=60_000)

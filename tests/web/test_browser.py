@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -34,6 +35,20 @@ WEBGL_ARGS = [a for a in CHROMIUM_ARGS if a != "--disable-gpu"] + [
 ]
 
 pytestmark = pytest.mark.browser
+
+
+@contextmanager
+def webgl_chromium() -> Iterator[Browser]:
+    """Start a headless Chromium that draws WebGL in software."""
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=WEBGL_ARGS)
+        yield browser
+        browser.close()
+
+
+def log_in_page(page: Page, base: str, user: User) -> None:
+    """Log a user in through the login form."""
+    _log_in(page, base, user.email, PASSWORD)
 
 
 @pytest.fixture
