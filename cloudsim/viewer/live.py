@@ -33,6 +33,7 @@ VIEWER_TTL_S = 15  # a viewer that has not polled this long no longer counts
 RELAY_LEASE_S = 20  # a relay that has not renewed this long is presumed dead
 WATCH_CHUNK_S = 120  # one `drcsim watch` call; the relay starts another while viewers remain
 CHECK_EVERY_S = 1.0
+RETRY_AFTER_FAILURE_S = 30
 
 
 class TooManyRequests(CloudSimError):
@@ -189,7 +190,9 @@ def relay_job(ctx: JobContext) -> None:
                     relay.check()  # the run ended under the watcher: that is no failure
                     raise
     except _RelayDone:
-        pass
-    finally:
         client.delete(_key(run.id, "relay"))
+    except Exception:
+        # viewers keep asking: the next relay starts after a pause, not at every poll
+        client.set(_key(run.id, "relay"), "failed", ex=RETRY_AFTER_FAILURE_S)
+        raise
     ctx.log(f"relayed {relay.frames} frame(s) of run {run.id}; nobody watches any more")

@@ -10,10 +10,12 @@ from flask import Flask
 from flask.testing import FlaskClient
 
 from cloudsim.config import Config
+from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
+from cloudsim.jobs.runner import JobContext
 from cloudsim.models import Job, Role, RunState, User
 from cloudsim.people import service
-from cloudsim.viewer.live import _key, redis_client, store_frame
+from cloudsim.viewer.live import _key, redis_client, relay_job, store_frame
 from tests.conftest import log_in, make_user, running_app, token_for
 from tests.viewer.conftest import store_run
 
@@ -100,6 +102,14 @@ def test_live_viewers_are_throttled_capped_and_share_one_relay(
         redis_client().delete(_key(run.id, f"poll:{officers[0].id}:tab1"))
         frames = first.get(f"{url}?viewer=tab1&after=1.0").get_json()["frames"]
         assert [f["step"] for f in frames] == [1100]
+        # a relay that fails (here: the run has no constellation to reach) is not restarted
+        # at every poll, but after a pause
+        with pytest.raises(CloudSimError, match="no longer exists"):
+            relay_job(JobContext(relays[0]))
+        assert redis_client().get(_key(run.id, "relay")) == "failed"
+        redis_client().delete(_key(run.id, f"poll:{officers[0].id}:tab1"))
+        assert first.get(f"{url}?viewer=tab1").get_json()["relay"] == "failed"
+        assert db.session.scalar(db.select(db.func.count(Job.id))) == 1
 
 
 def test_the_api_gives_a_script_the_scene_and_the_replay_frames(
