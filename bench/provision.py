@@ -21,9 +21,9 @@ from celery.contrib.testing.worker import start_worker  # noqa: E402
 from cloudsim.app import create_app  # noqa: E402
 from cloudsim.config import Config  # noqa: E402
 from cloudsim.extensions import db  # noqa: E402
-from cloudsim.fleet import service  # noqa: E402
-from cloudsim.fleet.providers import open_provider  # noqa: E402
+from cloudsim.launched_constellations import service  # noqa: E402
 from cloudsim.models import Job  # noqa: E402
+from cloudsim.providers.service import open_provider  # noqa: E402
 from constellations.plans.software import build_wheelhouse, distribution_source  # noqa: E402
 from tests.support.servers import RedisServer  # noqa: E402
 

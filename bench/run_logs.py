@@ -25,12 +25,12 @@ from celery.contrib.testing.worker import start_worker  # noqa: E402
 
 from cloudsim.app import create_app  # noqa: E402
 from cloudsim.competition.artifacts import RUN_LOGS, LogStore, collect_logs, run_dir  # noqa: E402
-from cloudsim.competition.engine import machines  # noqa: E402
+from cloudsim.competition.jobs import machines  # noqa: E402
 from cloudsim.config import Config  # noqa: E402
 from cloudsim.extensions import db  # noqa: E402
-from cloudsim.fleet import service  # noqa: E402
-from cloudsim.fleet.providers import open_provider  # noqa: E402
+from cloudsim.launched_constellations import service  # noqa: E402
 from cloudsim.models import Job, Run, RunState, Task, Team, utcnow  # noqa: E402
+from cloudsim.providers.service import open_provider  # noqa: E402
 from tests.support.servers import RedisServer  # noqa: E402
 
 

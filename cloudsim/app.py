@@ -58,21 +58,16 @@ def create_app(config: Config | None = None) -> Flask:
     limiter.init_app(app)
     login_manager.init_app(app)
 
-    from cloudsim.jobs.queue import celery_init_app
-
-    celery_init_app(app, config)
-
     from cloudsim.api import init_api
-    from cloudsim.auth.session import init_login
+    from cloudsim.features import features
+    from cloudsim.jobs.queue import celery_init_app
     from cloudsim.web import register_web
 
-    init_login(app)
-    api = init_api(app)
+    celery_init_app(app, config)
+    init_api(app)
+    for feature in features():
+        feature.init_app(app)
     register_web(app)  # after the API: its error pages answer JSON under /api/ too
-
-    from cloudsim.viewer import init_app as init_viewer
-
-    init_viewer(app, api)
     return app
 
 

@@ -1,12 +1,10 @@
-"""The JSON REST API under /api/v1: token authentication, OpenAPI description, blueprints."""
+"""The JSON REST API shell under /api/v1: the OpenAPI description; features add their blueprints."""
 
 from __future__ import annotations
 
-from flask import Flask, g, request
-from flask.typing import ResponseReturnValue
-from flask_smorest import Api
+from flask import Flask
+from flask_smorest import Api, Blueprint
 
-from cloudsim.auth.tokens import user_for_token
 from cloudsim.extensions import csrf
 
 API_PREFIX = "/api/v1"
@@ -14,7 +12,7 @@ PUBLIC_PATHS = {f"{API_PREFIX}/openapi.json"}
 
 
 def init_api(app: Flask) -> Api:
-    """Register the API blueprints and serve their OpenAPI description at /api/v1/openapi.json."""
+    """Create the API; it describes every blueprint at /api/v1/openapi.json."""
     app.config.update(
         API_TITLE="CloudSim API",
         API_VERSION="v1",
@@ -31,22 +29,11 @@ def init_api(app: Flask) -> Api:
         },
     )
     api = Api(app)
-    from cloudsim.api import account, audit, competition, constellations, jobs, people
-
-    for module in (account, people, jobs, audit, constellations, competition):
-        csrf.exempt(module.blp)
-        api.register_blueprint(module.blp, url_prefix=API_PREFIX)
-
-    @app.before_request
-    def authenticate_api() -> ResponseReturnValue | None:
-        if not request.path.startswith(API_PREFIX + "/") or request.path in PUBLIC_PATHS:
-            return None
-        scheme, _, token = request.headers.get("Authorization", "").partition(" ")
-        user = user_for_token(token.strip()) if scheme.lower() == "bearer" else None
-        if user is None:
-            message = "authentication required: send 'Authorization: Bearer <token>'"
-            return {"code": 401, "message": message}, 401
-        g.api_user = user
-        return None
-
+    app.extensions["cloudsim.api"] = api
     return api
+
+
+def register_api(app: Flask, blueprint: Blueprint) -> None:
+    """Serve a feature's API blueprint under /api/v1 (token-authenticated, so no CSRF)."""
+    csrf.exempt(blueprint)
+    app.extensions["cloudsim.api"].register_blueprint(blueprint, url_prefix=API_PREFIX)

@@ -1,1 +1,20 @@
-"""The audit trail: recording and viewing who did what."""
+"""Audit: the record of who did what, its page and API."""
+
+from __future__ import annotations
+
+import click
+from flask import Flask
+
+
+def init_app(app: Flask) -> None:
+    """Register this feature's pages, API and jobs with the app."""
+    from cloudsim.api import register_api
+    from cloudsim.audit import api, views
+
+    app.register_blueprint(views.bp)
+    register_api(app, api.blp)
+
+
+def init_cli(cli: click.Group) -> None:
+    """Add this feature's commands to `cloudsim`."""
+    del cli  # no commands of its own

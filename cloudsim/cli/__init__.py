@@ -1,4 +1,4 @@
-"""The `cloudsim` command: start the system, migrate the database, manage teams and users."""
+"""The `cloudsim` command: start the system and migrate the database; features add the rest."""
 
 from __future__ import annotations
 
@@ -67,18 +67,13 @@ def main(ctx: click.Context) -> None:
 
 
 def _register() -> None:
-    from cloudsim.cli import competition, db, fleet, people, providers, up
+    from cloudsim.cli import db, up
+    from cloudsim.features import features
 
     main.add_command(up.up)
     main.add_command(db.db)
-    main.add_command(people.team)
-    main.add_command(people.user)
-    main.add_command(fleet.constellation)
-    main.add_command(providers.provider)
-    main.add_command(competition.task)
-    main.add_command(competition.schedule_group)
-    main.add_command(competition.run)
-    main.add_command(competition.leaderboard)
+    for feature in features():
+        feature.init_cli(main)
 
 
 _register()

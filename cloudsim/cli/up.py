@@ -13,7 +13,7 @@ from cloudsim.cli import app_context, reports_errors
 from cloudsim.competition.demo import schedule_demo
 from cloudsim.config import Config
 from cloudsim.extensions import db
-from cloudsim.fleet.service import launch
+from cloudsim.launched_constellations.service import launch
 from cloudsim.models import Constellation, ConstellationState, Team
 from cloudsim.people.service import create_team, ensure_first_admin
 from cloudsim.runtime.redis_server import redis_command

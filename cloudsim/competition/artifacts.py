@@ -22,7 +22,7 @@ from sqlalchemy import select
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
-from cloudsim.fleet.router_control import BANDWIDTH_LOG
+from cloudsim.launched_constellations.router_control import BANDWIDTH_LOG
 from cloudsim.models import Artifact, Run
 from provisioners.ssh import Machine as Target
 from provisioners.ssh import SSHError, SSHExecutor

@@ -16,7 +16,7 @@ from datetime import timedelta
 from flask import current_app
 from sqlalchemy import select
 
-from cloudsim.competition.engine import DRCSIM, RunError, machines
+from cloudsim.competition.jobs import DRCSIM, RunError, machines
 from cloudsim.competition.runs import start_run
 from cloudsim.competition.schedule import TaskSpec, schedule
 from cloudsim.config import Config

@@ -34,28 +34,18 @@ def celery_init_app(app: Flask, config: Config) -> Celery:
             "unacked_restore_interval": 5,
         },
         task_default_queue="cloudsim",
-        beat_schedule={
-            "sweep-jobs": {
-                "task": "cloudsim.jobs.sweep",
-                "schedule": timedelta(seconds=max(5, config.job_lease_seconds // 2)),
-            },
-            "reconcile-providers": {
-                "task": "cloudsim.fleet.reconcile",
-                "schedule": timedelta(minutes=5),
-            },
-            "supervise-runs": {
-                "task": "cloudsim.competition.supervise",
-                "schedule": timedelta(seconds=config.run_supervise_seconds),
-            },
-        },
         timezone="UTC",
     )
     celery.set_default()
     app.extensions["celery"] = celery
-    # Importing the task modules registers them with the app's Celery.
-    from cloudsim.competition import demo  # noqa: F401
-    from cloudsim.competition import engine as competition_engine  # noqa: F401
-    from cloudsim.fleet import engine, reconcile  # noqa: F401
-    from cloudsim.jobs import diagnostics, runner, service  # noqa: F401
-
     return celery
+
+
+def schedule_task(app: Flask, task: str, every: timedelta) -> None:
+    """Have Celery beat send `task` periodically."""
+    celery: Celery = app.extensions["celery"]
+    # A new dict: Celery's default schedule object may be shared between apps.
+    celery.conf.beat_schedule = {
+        **celery.conf.beat_schedule,
+        task: {"task": task, "schedule": every},
+    }

@@ -14,7 +14,7 @@ from cloudsim.auth.passwords import generate_password, hash_password
 from cloudsim.auth.policy import require_role, require_team_access
 from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.fleet.vpn import revoke_and_push
+from cloudsim.launched_constellations.vpn import revoke_and_push
 from cloudsim.models import ConstellationState, Role, Team, User
 
 TEAM_NAME_MAX = 80

@@ -2,19 +2,21 @@
 
 from __future__ import annotations
 
+import click
 from flask import Flask
-from flask_smorest import Api
-
-from cloudsim.api import API_PREFIX
-from cloudsim.extensions import csrf
 
 
-def init_app(app: Flask, api: Api) -> None:
+def init_app(app: Flask) -> None:
     """Register the viewer's pages, its API and its relay job."""
+    from cloudsim.api import register_api
     from cloudsim.viewer import live  # noqa: F401  (registers the viewer.relay job kind)
     from cloudsim.viewer.api import blp
     from cloudsim.viewer.views import bp
 
     app.register_blueprint(bp)
-    csrf.exempt(blp)
-    api.register_blueprint(blp, url_prefix=API_PREFIX)
+    register_api(app, blp)
+
+
+def init_cli(cli: click.Group) -> None:
+    """Add this feature's commands to `cloudsim`."""
+    del cli  # no commands of its own

@@ -17,7 +17,7 @@ from typing import Any
 import redis
 from flask import current_app
 
-from cloudsim.competition.engine import DRCSIM, machines
+from cloudsim.competition.jobs import DRCSIM, machines
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError, NotFound, Unavailable
 from cloudsim.extensions import db

@@ -1,4 +1,4 @@
-"""The browser side: blueprints, error pages, template helpers."""
+"""The browser shell: error pages and template helpers; features add their blueprints."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ from flask.typing import ResponseReturnValue
 from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException
 
-from cloudsim.auth.forms import ConfirmForm
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.models import Role
@@ -27,20 +26,8 @@ MESSAGES = {
 
 
 def register_web(app: Flask) -> None:
-    """Register every page blueprint, the error pages and the template globals."""
-    from cloudsim.audit.views import bp as audit_bp
-    from cloudsim.auth.views import bp as auth_bp
-    from cloudsim.competition.views import bp as competition_bp
-    from cloudsim.dashboard.views import bp as dashboard_bp
-    from cloudsim.fleet.views import bp as fleet_bp
-    from cloudsim.jobs.views import bp as jobs_bp
-    from cloudsim.people.views import bp as people_bp
-
-    for blueprint in (auth_bp, dashboard_bp, people_bp, fleet_bp, jobs_bp, audit_bp):
-        app.register_blueprint(blueprint)
-    app.register_blueprint(competition_bp)
-
-    app.jinja_env.globals.update(Role=Role, logout_form=ConfirmForm)
+    """Register the error pages and the template globals every page uses."""
+    app.jinja_env.globals.update(Role=Role)
     app.jinja_env.filters["datetime"] = format_datetime
 
     @app.errorhandler(CloudSimError)

@@ -117,7 +117,7 @@ def test_duplicate_team_is_refused(run: Callable[..., Result]) -> None:
 def test_providers_are_configured_with_clear_errors(
     run: Callable[..., Result], tmp_path: Path
 ) -> None:
-    from cloudsim.fleet.keys import generate_keypair
+    from cloudsim.launched_constellations.keys import generate_keypair
 
     assert "ec2\tnot configured" in run("provider", "list").output
     bad = tmp_path / "bad.yaml"

@@ -1,3 +1,3 @@
-"""Constellation fixtures of tests/fleet, for the end-to-end runs."""
+"""Constellation fixtures of tests/launched_constellations, for the end-to-end runs."""
 
-from tests.fleet.conftest import fleet_app, fleet_config  # noqa: F401
+from tests.launched_constellations.conftest import constellations_app, constellations_config  # noqa: F401

@@ -24,16 +24,16 @@ from cloudsim.competition.artifacts import (
     remote_sha256,
     run_dir,
 )
-from cloudsim.competition.engine import ROUTER_FAULT, machines, supervise_runs
+from cloudsim.competition.jobs import ROUTER_FAULT, machines, supervise_runs
 from cloudsim.competition.plots import read_bandwidth_log
 from cloudsim.competition.schedule import in_zone
 from cloudsim.config import Config
 from cloudsim.extensions import db
-from cloudsim.fleet import service as fleet
+from cloudsim.launched_constellations import service as constellations
 from cloudsim.models import JobState, Role, Run, RunState, Team, User, utcnow
 from cloudsim.people import service as people_service
 from tests.conftest import PASSWORD, make_user, token_for
-from tests.fleet.conftest import finished
+from tests.launched_constellations.conftest import finished
 from tests.support.servers import wait_for
 from tests.support.workers import kill_worker, worker_process
 from tests.web.test_browser import CHROMIUM, CHROMIUM_ARGS
@@ -44,8 +44,8 @@ RUN_SECONDS = 25  # simulated: the example controller passes a gate or two, not 
 
 
 @pytest.fixture
-def live_url(fleet_app: Flask) -> Iterator[str]:
-    server = make_server("127.0.0.1", 0, fleet_app, threaded=True)
+def live_url(constellations_app: Flask) -> Iterator[str]:
+    server = make_server("127.0.0.1", 0, constellations_app, threaded=True)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     yield f"http://127.0.0.1:{server.server_port}"
@@ -79,8 +79,8 @@ def _local(minutes: int) -> str:
     [("vrc", "fc1", "time_limit"), ("simple", "sim", "stopped")],
 )
 def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
-    fleet_app: Flask,
-    fleet_config: Config,
+    constellations_app: Flask,
+    constellations_config: Config,
     live_url: str,
     browser: Browser,
     tmp_path: Path,
@@ -93,9 +93,9 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     team_b = people_service.create_team(None, "Team B")
     officer = make_user(Role.OFFICER)
     user_a, user_b = make_user(Role.USER, team_a), make_user(Role.USER, team_b)
-    celery = fleet_app.extensions["celery"]
+    celery = constellations_app.extensions["celery"]
     with start_worker(celery, pool="threads", concurrency=2, perform_ping_check=False):
-        constellation, job = fleet.launch(None, name="e2e", kind=kind, provider="local")
+        constellation, job = constellations.launch(None, name="e2e", kind=kind, provider="local")
         constellation.team_id = team_a.id
         db.session.commit()
         done = finished(job.id)
@@ -116,7 +116,7 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     expect(page.get_by_text("Scheduled Walking, short for 1 team(s).")).to_be_visible()
 
     # the simulator keeps running when the worker that started it dies
-    process = worker_process(fleet_config)
+    process = worker_process(constellations_config)
     try:
         page = browser.new_context().new_page()
         _log_in(page, live_url, user_a)
@@ -128,10 +128,10 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     run = db.session.scalars(db.select(Run)).one()
     assert run.state == RunState.RUNNING, run.error
     expect(page.locator("#run-state")).to_have_text("running")
-    _refusals(fleet_app, team_a, user_a, user_b, run)
+    _refusals(constellations_app, team_a, user_a, user_b, run)
 
     db.session.refresh(run)
-    with machines(run, fleet_config) as reach:
+    with machines(run, constellations_config) as reach:
         controller = (
             "systemd-run --unit=example-controller --collect /opt/drcsim/bin/drcsim "
             f"example-controller --server {shlex.quote(reach.sim_ip)} --world vrc_task_2 "
@@ -177,9 +177,9 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     stored = {a.filename: a for a in run.artifacts}
     expected = [log for log in RUN_LOGS if kind == "vrc" or log.machine == "sim"]
     assert {log.filename for log in expected} == set(stored)
-    client = fleet_app.test_client()
+    client = constellations_app.test_client()
     headers = token_for(user_a)
-    with machines(run, fleet_config) as reach:
+    with machines(run, constellations_config) as reach:
         for artifact in stored.values():
             target = reach.router if artifact.filename == "bandwidth.jsonl" else reach.sim
             assert target is not None
@@ -191,9 +191,14 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
             assert hashlib.sha256(body.data).hexdigest() == artifact.sha256 == on_machine
     # collecting again copies nothing: every log is stored with the same checksum
     lines: list[str] = []
-    with machines(run, fleet_config) as reach:
+    with machines(run, constellations_config) as reach:
         again = collect_logs(
-            run, reach.executor, reach.by_role(), LogStore(fleet_config), tmp_path, lines.append
+            run,
+            reach.executor,
+            reach.by_role(),
+            LogStore(constellations_config),
+            tmp_path,
+            lines.append,
         )
     assert again == [] and len(lines) == len(expected)
     assert all("stored already" in line for line in lines), lines
@@ -208,7 +213,7 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     expect(page.locator("#run-state")).to_have_text("finished")
     if kind == "vrc":  # the router was armed with the task's caps and logged the run
         expect(page.locator("svg[aria-label='Uplink bits used'] .limit")).to_have_count(1)
-        store = LogStore(fleet_config)
+        store = LogStore(constellations_config)
         usage = read_bandwidth_log(store.lines(stored["bandwidth.jsonl"].location))
         assert usage["uplink"].cap_bits == 115200
     expect(page.get_by_role("link", name="score.jsonl")).to_be_visible()

@@ -11,7 +11,7 @@ from drcsim.runlog import read_states
 from flask import current_app
 
 from cloudsim.competition.artifacts import LogStore
-from cloudsim.competition.engine import score_run
+from cloudsim.competition.jobs import score_run
 from cloudsim.extensions import db
 from cloudsim.models import Run, RunState, Team, utcnow
 from tests.competition.support import open_task, store_log

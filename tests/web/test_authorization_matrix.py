@@ -48,16 +48,17 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("people.edit_user", "POST"): (LOGIN, 403, 403, 400, 400),
     ("people.delete_user", "POST"): (LOGIN, 403, 403, 302, 302),
     # web: constellations (team A's)
-    ("fleet.index", "GET"): (LOGIN, 200, 200, 200, 200),
-    ("fleet.launch", "POST"): (LOGIN, 403, 403, 403, 400),
-    ("fleet.show", "GET"): (LOGIN, 200, 404, 200, 200),
-    ("fleet.status", "GET"): (LOGIN, 200, 404, 200, 200),
-    ("fleet.terminate", "POST"): (LOGIN, 403, 403, 403, 302),
-    ("fleet.retry", "POST"): (LOGIN, 403, 403, 403, 409),  # it is not in error
-    ("fleet.ssh_bundle", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("constellations.index", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("constellations.launch", "POST"): (LOGIN, 403, 403, 403, 400),
+    ("constellations.show", "GET"): (LOGIN, 200, 404, 200, 200),
+    ("constellations.status", "GET"): (LOGIN, 200, 404, 200, 200),
+    ("constellations.terminate", "POST"): (LOGIN, 403, 403, 403, 302),
+    ("constellations.retry", "POST"): (LOGIN, 403, 403, 403, 409),  # it is not in error
+    ("constellations.ssh_bundle", "GET"): (LOGIN, 403, 403, 200, 200),
     # a team user's own VPN bundle: the fixture's constellation has no router address yet (409);
-    # officers and admins are no team members (400) but may ask for a member's (see tests/fleet)
-    ("fleet.vpn_bundle", "GET"): (LOGIN, 409, 404, 400, 400),
+    # officers and admins are no team members (400) but may ask for a member's
+    # (see tests/launched_constellations)
+    ("constellations.vpn_bundle", "GET"): (LOGIN, 409, 404, 400, 400),
     # web: jobs, audit
     ("jobs.index", "GET"): (LOGIN, 403, 403, 200, 200),
     ("jobs.start_diagnostics", "POST"): (LOGIN, 403, 403, 403, 302),

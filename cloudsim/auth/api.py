@@ -1,0 +1,65 @@
+"""The API's bearer-token authentication, and the caller's own account and API tokens."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from flask import Flask, g, request
+from flask.typing import ResponseReturnValue
+from flask.views import MethodView
+from flask_smorest import Blueprint
+
+from cloudsim.api import API_PREFIX, PUBLIC_PATHS
+from cloudsim.api.common import caller, columns
+from cloudsim.auth.schemas import IssuedTokenSchema, TokenSchema
+from cloudsim.auth.tokens import issue_token, revoke_token, user_for_token
+from cloudsim.people.schemas import UserSchema
+
+blp = Blueprint("api_account", __name__, description="The caller's account and API tokens")
+
+
+def init_bearer_auth(app: Flask) -> None:
+    """Make every API request (but the OpenAPI description) name its user by a bearer token."""
+
+    @app.before_request
+    def authenticate_api() -> ResponseReturnValue | None:
+        if not request.path.startswith(API_PREFIX + "/") or request.path in PUBLIC_PATHS:
+            return None
+        scheme, _, token = request.headers.get("Authorization", "").partition(" ")
+        user = user_for_token(token.strip()) if scheme.lower() == "bearer" else None
+        if user is None:
+            message = "authentication required: send 'Authorization: Bearer <token>'"
+            return {"code": 401, "message": message}, 401
+        g.api_user = user
+        return None
+
+
+@blp.route("/me")
+class Me(MethodView):
+    @blp.response(200, UserSchema)
+    def get(self) -> Any:
+        """Return the caller's account."""
+        return caller()
+
+
+@blp.route("/tokens")
+class Tokens(MethodView):
+    @blp.response(200, TokenSchema(many=True))
+    def get(self) -> Any:
+        """List the caller's tokens (never their values)."""
+        return caller().tokens
+
+    @blp.arguments(TokenSchema)
+    @blp.response(201, IssuedTokenSchema)
+    def post(self, data: dict[str, Any]) -> Any:
+        """Create a token; its value is in this answer only."""
+        issued = issue_token(caller(), data["name"])
+        return {**columns(issued.token), "token": issued.plaintext}
+
+
+@blp.route("/tokens/<int:token_id>")
+class TokenById(MethodView):
+    @blp.response(204)
+    def delete(self, token_id: int) -> None:
+        """Revoke one of the caller's tokens."""
+        revoke_token(caller(), token_id)

@@ -1,0 +1,393 @@
+"""A run's life as jobs: start (arm the router, start the simulator), stop (stop it, disarm,
+collect the logs, score), and the beat that notices when a live run must end.
+
+The simulator runs on `sim` as a transient systemd service, so it outlives the job (and the
+worker) that started it; the beat decides when it ends, whoever started it.
+"""
+
+from __future__ import annotations
+
+import logging
+import shlex
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from datetime import timedelta
+
+from celery import shared_task
+from csrouter.protocol import payload_bits_used
+from drcsim.rundir import FINAL, SCORE, read_score_log, serve_argv
+from flask import current_app
+from sqlalchemy import select
+
+from cloudsim.competition.artifacts import (
+    LogStore,
+    artifact_for,
+    collect_logs,
+    run_dir,
+    snapshot_bandwidth_log,
+)
+from cloudsim.competition.plots import read_bandwidth_log
+from cloudsim.competition.runs import request_stop
+from cloudsim.config import Config
+from cloudsim.errors import CloudSimError, NotFound
+from cloudsim.extensions import db
+from cloudsim.jobs.runner import JobContext, job_kind
+from cloudsim.jobs.service import enqueue
+from cloudsim.launched_constellations import router_control
+from cloudsim.launched_constellations.connect import MachineHostKeys, targets
+from cloudsim.launched_constellations.keys import constellation_keypair
+from cloudsim.models import Job, JobState, Run, RunState, ScoreEvent, utcnow
+from cloudsim.providers.service import open_provider
+from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
+from provisioners.ssh import Machine as Target
+
+log = logging.getLogger(__name__)
+ROUTER_FAULT = "router fault (OCU traffic is held until it is fixed): "
+DRCSIM = "/opt/drcsim/bin/drcsim"
+STOP_TIMEOUT_S = 60
+MAX_STOP_ATTEMPTS = 3
+
+
+class RunError(CloudSimError):
+    """A step of a run's start or stop failed; the message says which and why."""
+
+
+def unit_name(run_id: int) -> str:
+    """Return the systemd unit the run's simulator runs as on `sim`."""
+    return f"drcsim-run-{run_id}"
+
+
+@dataclass
+class Machines:
+    """SSH to a run's constellation: the executor and a target per role."""
+
+    executor: SSHExecutor
+    sim: Target
+    router: Target | None
+    sim_ip: str
+    by_name: dict[str, Target]
+
+    def by_role(self) -> dict[str, Target]:
+        found = {"sim": self.sim}
+        if self.router is not None:
+            found["router"] = self.router
+        return found
+
+
+@contextmanager
+def machines(
+    run: Run,
+    config: Config,
+    ctx: JobContext | None = None,
+    sink: Callable[[str, str], None] | None = None,
+) -> Iterator[Machines]:
+    """Connect to the run's sim and router; output lines go to the job log or to `sink`."""
+    constellation = run.constellation
+    if constellation is None:
+        raise RunError(f"run {run.id}: its constellation no longer exists")
+    keys = constellation_keypair(constellation)
+    nodes = open_provider(constellation.provider, config).nodes(constellation.name)
+    reach = targets(constellation, nodes, keys)
+    by_role = {m.role: m for m in constellation.machines}
+    sim = by_role.get("sim")
+    if sim is None or not sim.private_ip:
+        raise RunError(f"{constellation.name} has no simulator machine")
+    router = by_role.get("router")
+    executor = SSHExecutor(
+        MachineHostKeys(constellation),
+        log_sink=ctx.line_sink() if ctx else sink,
+        secrets=[keys.private],
+        connect_policy=ConnectPolicy(deadline=60),
+    )
+    with executor:
+        yield Machines(
+            executor=executor,
+            sim=reach[sim.name],
+            router=reach[router.name] if router is not None else None,
+            sim_ip=sim.private_ip,
+            by_name=reach,
+        )
+
+
+def _run(ctx: JobContext) -> Run:
+    run = db.session.get(Run, ctx.job.target_id)
+    if run is None:
+        raise NotFound(f"run {ctx.job.target_id} no longer exists")
+    return run
+
+
+def simulator_command(run: Run, sim_ip: str, allow: list[str]) -> str:
+    """Return the shell command that starts the run's simulator as a transient service."""
+    task = run.task
+    folder = run_dir(run.id)
+    argv = [
+        "systemd-run",
+        f"--unit={unit_name(run.id)}",
+        "--collect",
+        "--property=KillSignal=SIGTERM",
+        f"--property=TimeoutStopSec={STOP_TIMEOUT_S}",
+        f"--property=StandardOutput=append:{folder}/simulator.log",
+        f"--property=StandardError=append:{folder}/simulator.log",
+        *serve_argv(
+            DRCSIM,
+            task.world,
+            task.run_config,
+            bind=sim_ip,
+            allow=allow,
+            log_dir=folder,
+            time_limit_s=task.timeout_s,
+        ),
+    ]
+    return f"mkdir -p {shlex.quote(folder)} && " + " ".join(map(shlex.quote, argv))
+
+
+def _allowed_networks(run: Run) -> list[str]:
+    resources = run.constellation.resources if run.constellation else {}
+    # OCU traffic reaches sim from the router's LAN address (masqueraded), so the LAN covers it
+    networks = [resources.get("subnet"), resources.get("vpn_network")]
+    return [n for n in networks if n]
+
+
+@job_kind("run.start")
+def start_run_job(ctx: JobContext) -> None:
+    """Arm the router and start the simulator; the run is then `running` until the beat ends it."""
+    run = _run(ctx)
+    if run.state != RunState.STARTING:
+        ctx.log(f"run {run.id} is {run.state.value}; nothing to start")
+        return
+    config: Config = current_app.config["CLOUDSIM"]
+    task = run.task
+    try:
+        with machines(run, config, ctx) as reach:
+            if reach.router is not None:
+                ctx.stage("router", 20)
+                limits = router_control.Limits(
+                    task.latency_ms, task.uplink_bits, task.downlink_bits
+                )
+                router_control.arm(reach.executor, reach.router, limits, f"run-{run.id}")
+            ctx.stage("simulator", 60)
+            _start_simulator(reach, run)
+    except (CloudSimError, SSHError, ValueError) as exc:
+        db.session.rollback()
+        run = _run(ctx)
+        run.error = f"starting failed at the {ctx.job.stage} stage: {exc}"
+        run.stop_reason = run.stop_reason or "error"
+        run.state = RunState.STOPPING
+        db.session.commit()
+        ctx.log(f"start failed ({exc}); stopping what was started")
+        _enqueue_stop(run)
+        raise RunError(run.error) from exc
+    run.state = RunState.RUNNING
+    run.running_at = utcnow()
+    db.session.commit()
+    ctx.stage("running", 100)
+    if run.stop_reason is not None:  # stopped while it was starting
+        request_stop(run, run.stop_reason)
+
+
+def _start_simulator(reach: Machines, run: Run) -> None:
+    unit = shlex.quote(unit_name(run.id))
+    final = shlex.quote(f"{run_dir(run.id)}/{FINAL}")
+    state = reach.executor.run(
+        reach.sim,
+        f"systemctl is-active --quiet {unit} && echo active || (test -f {final} && echo ended)"
+        " || echo absent",
+        timeout=30,
+    ).stdout.strip()
+    if state in ("active", "ended"):
+        reach.executor.log(reach.sim.name, f"simulator of run {run.id} already {state}")
+        return
+    reach.executor.run(
+        reach.sim, simulator_command(run, reach.sim_ip, _allowed_networks(run)), timeout=60
+    )
+
+
+def _enqueue_stop(run: Run) -> None:
+    enqueue("run.stop", None, target_type="run", target_id=run.id, team_id=run.team_id)
+
+
+@job_kind("run.stop")
+def stop_run_job(ctx: JobContext) -> None:
+    """Stop the simulator, disarm the router, collect and score the logs, finish the run."""
+    run = _run(ctx)
+    if run.state in (RunState.FINISHED, RunState.ERROR):
+        ctx.log(f"run {run.id} is {run.state.value} already")
+        return
+    run.state = RunState.STOPPING
+    db.session.commit()
+    config: Config = current_app.config["CLOUDSIM"]
+    # A router fault seen during the run is kept on the record; it does not fail the run.
+    router_note = run.error if run.error and run.error.startswith(ROUTER_FAULT) else None
+    problems: list[str] = [run.error] if run.error and not router_note else []
+    store = LogStore(config)
+    try:
+        with machines(run, config, ctx) as reach:
+            problems += _stop_on_machines(ctx, run, reach, store, config)
+    except (CloudSimError, SSHError) as exc:
+        problems.append(f"{ctx.job.stage}: {exc}")
+    ctx.stage("score", 90)
+    score_run(run, store)
+    run = _run(ctx)
+    run.error = "; ".join([*problems, *([router_note] if router_note else [])])[:4000] or None
+    run.state = RunState.ERROR if problems else RunState.FINISHED
+    run.end_reason = run.end_reason or run.stop_reason
+    run.finished_at = utcnow()
+    run.active_constellation_id = None
+    db.session.commit()
+    ctx.log(f"run {run.id} {run.state.value}: {run.score} checkpoint(s), ended by {run.end_reason}")
+
+
+def _stop_on_machines(
+    ctx: JobContext, run: Run, reach: Machines, store: LogStore, config: Config
+) -> list[str]:
+    problems = []
+    ctx.stage("simulator", 10)
+    unit = shlex.quote(unit_name(run.id))
+    try:
+        # SIGTERM: the simulator ends the run ("closed") and writes its final record
+        reach.executor.run(reach.sim, f"systemctl stop {unit} || true", timeout=STOP_TIMEOUT_S + 30)
+    except SSHError as exc:
+        problems.append(f"simulator: {exc}")
+    if reach.router is not None:
+        ctx.stage("router", 30)
+        try:
+            router_control.disarm(reach.executor, reach.router)
+        except CloudSimError as exc:
+            problems.append(str(exc))
+        try:
+            snapshot_bandwidth_log(reach.executor, reach.router, run.id)
+        except SSHError as exc:
+            problems.append(f"bandwidth log: {exc}")
+    ctx.stage("logs", 50)
+    staging = config.instance_dir / "staging" / "runs" / str(run.id)
+    return problems + collect_logs(
+        run, reach.executor, reach.by_role(), store, staging, lambda line: ctx.log(line)
+    )
+
+
+def score_run(run: Run, store: LogStore) -> None:
+    """Set the run's score, falls, time and bits used from its stored logs (again if repeated)."""
+    score = artifact_for(run, SCORE)
+    if score is not None:
+        result = read_score_log(store.lines(score.location))
+        db.session.query(ScoreEvent).filter_by(run_id=run.id).delete()
+        for event in result.events:
+            db.session.add(
+                ScoreEvent(
+                    run_id=run.id,
+                    kind=event.kind,
+                    checkpoint=event.checkpoint,
+                    points=event.points,
+                    sim_time=event.sim_time,
+                    wall_time=event.wall_time,
+                    description=event.description,
+                )
+            )
+        run.score, run.falls = result.score, result.falls
+        run.sim_seconds = result.sim_seconds
+        run.end_reason = _end_reason(result.end_reason, run.stop_reason)
+    bandwidth = artifact_for(run, "bandwidth.jsonl")
+    if bandwidth is not None:
+        usage = read_bandwidth_log(store.lines(bandwidth.location))
+        run.uplink_bits_used = usage["uplink"].used_bits
+        run.downlink_bits_used = usage["downlink"].used_bits
+    db.session.commit()
+
+
+def _end_reason(simulator: str | None, requested: str | None) -> str | None:
+    """Prefer why CloudSim stopped the run over the simulator's "closed" (it was told to)."""
+    if simulator in (None, "closed", "stopped") and requested:
+        return requested
+    return simulator
+
+
+@shared_task(name="cloudsim.competition.supervise")
+def supervise_runs() -> int:
+    """Start the stop job of every live run that must end; return how many were started."""
+    config: Config = current_app.config["CLOUDSIM"]
+    now = utcnow()
+    stopped = 0
+    for run in db.session.scalars(select(Run).where(Run.state == RunState.RUNNING)).all():
+        reason = run.stop_reason
+        if reason is None and now >= run.task.window_stop:
+            reason = "window"
+        started = run.running_at or run.started_at
+        limit = timedelta(seconds=run.task.timeout_s + config.run_grace_seconds)
+        if reason is None and now >= started + limit:
+            reason = "timeout"
+        if reason is None:
+            try:
+                reason = follow(run, config)
+            except (CloudSimError, SSHError) as exc:
+                log.warning("run %s: cannot check the simulator: %s", run.id, exc)
+                continue
+        if reason is not None:
+            stopped += request_stop(run, reason)
+    return stopped + _retry_failed_stops()
+
+
+def _retry_failed_stops() -> int:
+    """Start the stop job again for runs left `stopping` by a stop job that failed."""
+    retried = 0
+    for run in db.session.scalars(select(Run).where(Run.state == RunState.STOPPING)).all():
+        jobs = list(
+            db.session.scalars(
+                select(Job)
+                .where(Job.kind == "run.stop", Job.target_type == "run", Job.target_id == run.id)
+                .order_by(Job.created_at.desc())
+            )
+        )
+        if jobs and jobs[0].state == JobState.FAILED and len(jobs) < MAX_STOP_ATTEMPTS:
+            log.warning("run %s: stop job failed (%s); starting it again", run.id, jobs[0].error)
+            _enqueue_stop(run)
+            retried += 1
+    return retried
+
+
+def follow(run: Run, config: Config) -> str | None:
+    """Read the live score from `sim`; return "ended" when the simulator has finished."""
+    folder = run_dir(run.id)
+    unit = shlex.quote(unit_name(run.id))
+    command = (
+        f"cat {shlex.quote(f'{folder}/{SCORE}')} 2>/dev/null; echo '#'; "
+        f"test -f {shlex.quote(f'{folder}/{FINAL}')} && echo final; "
+        f"systemctl is-active --quiet {unit} || echo inactive"
+    )
+    with machines(run, config) as reach:
+        output = reach.executor.run(reach.sim, command, timeout=30).stdout
+        if reach.router is not None:
+            _count_bits(run, reach)
+    lines, _, status = output.rpartition("#\n")
+    result = read_score_log(lines.splitlines())
+    run.score, run.falls, run.sim_seconds = result.score, result.falls, result.sim_seconds
+    db.session.commit()
+    return "ended" if ("final" in status or "inactive" in status) else None
+
+
+def _count_bits(run: Run, reach: Machines) -> None:
+    """Show the bits used so far (the bandwidth log gives the final figures at the end)."""
+    assert reach.router is not None
+    try:
+        used = payload_bits_used(router_control.counters(reach.executor, reach.router))
+    except (CloudSimError, KeyError, TypeError, ValueError) as exc:
+        # the run's end is still detected; only the live figure waits for the next beat
+        log.warning("run %s: cannot read the router's counters: %s", run.id, exc)
+        _router_fault(run, reach)
+        return
+    run.uplink_bits_used, run.downlink_bits_used = used["uplink"], used["downlink"]
+    _router_fault(run, reach)
+
+
+def _router_fault(run: Run, reach: Machines) -> None:
+    """Show on the run a fault of the router's csrouter (down: OCU traffic stopped), or clear it."""
+    assert reach.router is not None
+    try:
+        faults = list(router_control.status(reach.executor, reach.router).get("faults") or [])
+    except CloudSimError as exc:
+        faults = [str(exc)]
+    if faults:
+        run.error = ROUTER_FAULT + "; ".join(map(str, faults))
+        log.warning("run %s: %s", run.id, run.error)
+    elif run.error and run.error.startswith(ROUTER_FAULT):
+        run.error = None

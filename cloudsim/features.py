@@ -1,0 +1,40 @@
+"""The features CloudSim is made of: each wires itself to Flask, the API, Celery and the CLI.
+
+A feature is a package under `cloudsim/` with `init_app(app)` (pages, API blueprint, job
+bodies, periodic tasks) and `init_cli(cli)` (its `cloudsim` commands; separate because the
+command line exists before, and often without, an app).
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import Protocol, cast
+
+import click
+from flask import Flask
+
+# The order is the order of the API's OpenAPI sections.
+FEATURES = (
+    "cloudsim.auth",
+    "cloudsim.dashboard",
+    "cloudsim.people",
+    "cloudsim.jobs",
+    "cloudsim.audit",
+    "cloudsim.launched_constellations",
+    "cloudsim.providers",
+    "cloudsim.competition",
+    "cloudsim.viewer",
+)
+
+
+class Feature(Protocol):
+    """What every feature package provides."""
+
+    def init_app(self, app: Flask) -> None: ...
+
+    def init_cli(self, cli: click.Group) -> None: ...
+
+
+def features() -> list[Feature]:
+    """Import every feature package (cheap: their hooks import the rest lazily)."""
+    return [cast(Feature, import_module(name)) for name in FEATURES]

@@ -1,1 +1,0 @@
-"""Constellations: launching, verifying and terminating sets of machines, and their pages."""

@@ -1,0 +1,28 @@
+"""Launched constellations: the machines a team gets (service, launch/terminate jobs, pages, API,
+`cloudsim constellation`). What a constellation is made of (kinds, plans) is the top-level
+`constellations` package."""
+
+from __future__ import annotations
+
+from datetime import timedelta
+
+import click
+from flask import Flask
+
+
+def init_app(app: Flask) -> None:
+    """Register this feature's pages, API and jobs with the app."""
+    from cloudsim.api import register_api
+    from cloudsim.jobs.queue import schedule_task
+    from cloudsim.launched_constellations import api, jobs, reconcile, views  # noqa: F401 (tasks)
+
+    app.register_blueprint(views.bp)
+    register_api(app, api.blp)
+    schedule_task(app, "cloudsim.launched_constellations.reconcile", timedelta(minutes=5))
+
+
+def init_cli(cli: click.Group) -> None:
+    """Add this feature's commands to `cloudsim`."""
+    from cloudsim.launched_constellations.cli import constellation
+
+    cli.add_command(constellation)

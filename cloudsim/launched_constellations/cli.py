@@ -1,0 +1,211 @@
+"""`cloudsim constellation`: launch, list, show, terminate, and run commands on machines."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import click
+
+from cloudsim.cli import app_context, emit, reports_errors
+from cloudsim.extensions import db
+from cloudsim.launched_constellations import service
+from cloudsim.launched_constellations.connect import MachineHostKeys, targets
+from cloudsim.launched_constellations.keys import constellation_keypair
+from cloudsim.launched_constellations.reconcile import destroy_orphans, find_orphans
+from cloudsim.models import Constellation, Job
+from cloudsim.people.service import find_team
+from cloudsim.providers.service import PROVIDERS, open_provider
+from constellations.definition import available_kinds
+from provisioners.ssh import SSHExecutor
+
+WORKER_HINT_SECONDS = 10
+
+
+def constellation_data(constellation: Constellation) -> dict[str, object]:
+    return {
+        "id": constellation.id,
+        "name": constellation.name,
+        "kind": constellation.kind,
+        "provider": constellation.provider,
+        "state": constellation.state.value,
+        "team": constellation.team.name if constellation.team else None,
+        "error": constellation.error,
+        "machines": [
+            {
+                "name": m.name,
+                "role": m.role,
+                "state": m.state.value,
+                "private_ip": m.private_ip,
+                "public_ip": m.public_ip,
+                "verification": m.verification,
+            }
+            for m in constellation.machines
+        ],
+    }
+
+
+def _wait(job_id: str, quiet: bool) -> Job:
+    """Follow a job to its end, with a progress bar on a terminal."""
+    started = time.monotonic()
+    hinted = False
+    show = not quiet and sys.stderr.isatty()
+    with (
+        click.progressbar(length=100, label="starting", file=sys.stderr, show_eta=False)
+        if show
+        else _NoBar() as bar
+    ):
+        done = 0
+        while True:
+            db.session.expire_all()
+            job = db.session.get(Job, job_id)
+            assert job is not None
+            bar.label = f"{job.stage or job.state.value:10}"
+            bar.update(job.progress - done)
+            done = job.progress
+            if job.state.final:
+                return job
+            if (
+                job.state.value == "queued"
+                and not hinted
+                and (time.monotonic() - started > WORKER_HINT_SECONDS)
+            ):
+                click.echo("still queued: is a worker running (cloudsim up)?", err=True)
+                hinted = True
+            time.sleep(0.5)
+
+
+class _NoBar:
+    label = ""
+
+    def __enter__(self) -> _NoBar:
+        return self
+
+    def __exit__(self, *args: object) -> None:
+        return None
+
+    def update(self, steps: int) -> None:
+        return None
+
+
+@click.group()
+def constellation() -> None:
+    """Launch, list, show and terminate constellations."""
+
+
+@constellation.command("launch")
+@click.option("--name", required=True, help="Constellation name (lowercase, digits, '-').")
+@click.option("--kind", required=True, type=click.Choice(available_kinds()))
+@click.option("--provider", default="local", show_default=True, type=click.Choice(PROVIDERS))
+@click.option("--team", "team_name", help="Team name or id.")
+@click.option("--wait", is_flag=True, help="Follow the launch to its end.")
+@click.option("--json", "as_json", is_flag=True, help="Print the constellation as JSON.")
+@reports_errors
+def launch(
+    name: str, kind: str, provider: str, team_name: str | None, wait: bool, as_json: bool
+) -> None:
+    """Launch a constellation."""
+    with app_context():
+        team_id = find_team(team_name).id if team_name else None
+        created, job = service.launch(
+            None, name=name, kind=kind, provider=provider, team_id=team_id
+        )
+        if wait:
+            job = _wait(job.id, as_json)
+            db.session.refresh(created)
+        emit(
+            constellation_data(created) | {"job": job.id},
+            as_json,
+            f"{created.name}: {created.state.value} (job {job.id})",
+        )
+        if wait and job.state.value == "failed":
+            raise click.ClickException(f"launch failed: {created.error or job.error}")
+
+
+@constellation.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def list_constellations(as_json: bool) -> None:
+    """List constellations."""
+    with app_context():
+        rows = db.session.scalars(service.visible_constellations(None)).all()
+        lines = "\n".join(
+            f"{c.name}\t{c.kind}\t{c.provider}\t{c.state.value}\t{c.team.name if c.team else '-'}"
+            for c in rows
+        )
+        emit([constellation_data(c) for c in rows], as_json, lines or "no constellations")
+
+
+@constellation.command("show")
+@click.argument("name")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def show(name: str, as_json: bool) -> None:
+    """Show a constellation's machines, roles, addresses and states."""
+    with app_context():
+        found = service.get_constellation(None, name)
+        lines = [f"{found.name} ({found.kind} on {found.provider}): {found.state.value}"]
+        if found.error:
+            lines.append(f"error: {found.error}")
+        for m in found.machines:
+            lines.append(
+                f"  {m.name:8} {m.role:8} {m.private_ip or '-':15} "
+                f"{m.public_ip or '-':15} {m.state.value}"
+            )
+        emit(constellation_data(found), as_json, "\n".join(lines))
+
+
+@constellation.command("terminate")
+@click.argument("name")
+@click.option("--wait", is_flag=True, help="Follow the termination to its end.")
+@reports_errors
+def terminate(name: str, wait: bool) -> None:
+    """Terminate a constellation, releasing every resource it has."""
+    with app_context():
+        job = service.terminate(None, name)
+        if wait:
+            job = _wait(job.id, False)
+            if job.state.value == "failed":
+                raise click.ClickException(f"terminate failed: {job.error}")
+        click.echo(f"{name}: {'terminated' if wait else 'terminating'} (job {job.id})")
+
+
+@constellation.command("orphans")
+@click.option(
+    "--destroy", is_flag=True, help="Destroy them (they belong to no live constellation)."
+)
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def orphans(destroy: bool, as_json: bool) -> None:
+    """List provider nodes that no live constellation owns; --destroy removes them."""
+    with app_context() as app:
+        config = app.config["CLOUDSIM"]
+        found = destroy_orphans(None, config) if destroy else find_orphans(config)
+        verb = "destroyed" if destroy else "orphan"
+        lines = "\n".join(
+            f"{verb}: {o.provider} {o.name} ({o.node_id}) of {o.constellation}" for o in found
+        )
+        emit([o.__dict__ for o in found], as_json, lines or "no orphan nodes")
+
+
+@constellation.command("ssh", context_settings={"ignore_unknown_options": True})
+@click.argument("name")
+@click.argument("machine")
+@click.argument("command", nargs=-1, required=True, type=click.UNPROCESSED)
+@reports_errors
+def ssh(name: str, machine: str, command: tuple[str, ...]) -> None:
+    """Run COMMAND on MACHINE of constellation NAME (after `--`)."""
+    with app_context() as app:
+        found = service.get_constellation(None, name)
+        keys = constellation_keypair(found)
+        provider = open_provider(found.provider, app.config["CLOUDSIM"])
+        reach = targets(found, provider.nodes(found.name), keys)
+        if machine not in reach:
+            raise click.ClickException(
+                f"{name} has no machine {machine!r} (machines: {', '.join(reach)})"
+            )
+        with SSHExecutor(MachineHostKeys(found), secrets=[keys.private]) as executor:
+            result = executor.run(reach[machine], " ".join(command), check=False)
+        click.echo(result.stdout, nl=False)
+        click.echo(result.stderr, nl=False, err=True)
+        sys.exit(result.exit_code)

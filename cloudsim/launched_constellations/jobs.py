@@ -1,0 +1,371 @@
+"""Launch and terminate constellations: the bodies of their jobs, every stage idempotent.
+
+A launch goes through keys, network, machines, firewall, install, verify and ready. Each
+stage reads what already exists (in the database and at the provider) and only adds what is
+missing, so a job resumed after its worker died finishes the work without duplicating or
+leaking machines.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from typing import Any, TypeVar
+
+from flask import current_app
+from libcloud.compute.base import Node, NodeAuthSSHKey
+from libcloud.compute.types import NodeState
+
+from cloudsim.config import Config
+from cloudsim.errors import CloudSimError, NotFound
+from cloudsim.extensions import db
+from cloudsim.jobs.runner import JobContext, job_kind
+from cloudsim.launched_constellations.connect import MachineHostKeys, targets
+from cloudsim.launched_constellations.keys import (
+    KeyPair,
+    constellation_keypair,
+    instance_admin_password,
+)
+from cloudsim.launched_constellations.verify import verify_constellation
+from cloudsim.launched_constellations.vpn import server_material
+from cloudsim.models import Constellation, ConstellationState, MachineState, Secret
+from cloudsim.providers.service import NetworkDriver, Provider, open_provider
+from constellations.definition import ConstellationKind, load_kind
+from constellations.plans import PLANS, Action, PlanContext, PlanItem, firewall
+from constellations.plans.software import (
+    build_source_bundle,
+    build_wheelhouse,
+    distribution_source,
+)
+from provisioners.operations import apply
+from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
+from provisioners.ssh import Machine as Target
+
+T = TypeVar("T")
+NEEDS_WHEELHOUSE = {"simulator", "field_computer"}
+BOOTING = (NodeState.PENDING, NodeState.STARTING, NodeState.REBOOTING)
+
+
+class ProvisioningError(CloudSimError):
+    """A stage of a launch or terminate failed; the message says which and why."""
+
+
+def _constellation(ctx: JobContext) -> Constellation:
+    constellation = db.session.get(Constellation, ctx.job.target_id)
+    if constellation is None:
+        raise NotFound(f"constellation {ctx.job.target_id} no longer exists")
+    return constellation
+
+
+@job_kind("constellation.launch")
+def launch_constellation(ctx: JobContext) -> None:
+    """Bring a constellation to `ready`, or to `error` with the reason."""
+    constellation = _constellation(ctx)
+    if constellation.state in (ConstellationState.TERMINATING, ConstellationState.TERMINATED):
+        raise ProvisioningError(f"{constellation.name} is {constellation.state.value}")
+    config: Config = current_app.config["CLOUDSIM"]
+    kind = load_kind(constellation.kind, set(PLANS))
+    constellation.state, constellation.error = ConstellationState.LAUNCHING, None
+    try:
+        _launch(ctx, constellation, kind, config)
+    except Exception as exc:
+        db.session.rollback()
+        constellation = _constellation(ctx)
+        constellation.state = ConstellationState.ERROR
+        constellation.error = ctx.masked(f"{ctx.job.stage}: {exc}")
+        db.session.commit()
+        raise
+    constellation.state = ConstellationState.READY
+    for machine in constellation.machines:
+        machine.state = MachineState.READY
+    ctx.stage("ready", 100)
+
+
+def _launch(
+    ctx: JobContext, constellation: Constellation, kind: ConstellationKind, config: Config
+) -> None:
+    ctx.stage("keys", 2)
+    keys = constellation_keypair(constellation)
+    provider = open_provider(constellation.provider, config)
+    driver = provider.driver
+    ctx.stage("network", 5)
+    subnet = ensure_network(ctx, driver, constellation, kind)
+    ctx.stage("machines", 10)
+    nodes = ensure_machines(ctx, provider, constellation, kind, keys, subnet)
+    executor = SSHExecutor(
+        MachineHostKeys(constellation),
+        log_sink=ctx.line_sink(),
+        secrets=[keys.private],
+        connect_policy=ConnectPolicy(deadline=120),
+    )
+    with executor:
+        reach = targets(constellation, nodes, keys)
+        contexts = {
+            m.name: _plan_context(constellation, kind, m.name, subnet, config)
+            for m in kind.machines
+        }
+        ctx.stage("firewall", 40)
+        if hasattr(driver, "ex_apply_firewall"):
+            driver.ex_apply_firewall(
+                _network(driver, constellation), list(kind.firewall), kind.roles
+            )
+        _deploy(ctx, executor, reach, {n: firewall(c) for n, c in contexts.items()})
+        ctx.stage("install", 50)
+        contexts = _with_software(ctx, executor, constellation, kind, contexts, config)
+        plans = {
+            n: [item for plan in c.machine.plan for item in PLANS[plan](c)]
+            for n, c in contexts.items()
+        }
+        _deploy(ctx, executor, reach, plans)
+        ctx.stage("verify", 80)
+        verify_constellation(ctx, executor, constellation, kind, reach, provider.public_probe)
+
+
+def _with_software(
+    ctx: JobContext,
+    executor: SSHExecutor,
+    constellation: Constellation,
+    kind: ConstellationKind,
+    contexts: dict[str, PlanContext],
+    config: Config,
+) -> dict[str, PlanContext]:
+    """Add to the plan contexts what the plans install: wheelhouses, bundles, VPN keys."""
+    cache = config.instance_dir / "wheelhouse"
+    used = {plan for machine in kind.machines for plan in machine.plan}
+    if used & NEEDS_WHEELHOUSE:
+        ctx.log("building the simulator's wheelhouse (cached after the first time)")
+        wheelhouse = build_wheelhouse(distribution_source("drcsim"), cache, config.machine_python)
+        contexts = {n: replace(c, wheelhouse=wheelhouse) for n, c in contexts.items()}
+    if "cloudsim_server" in used:
+        ctx.log("bundling CloudSim's source and wheels (cached after the first time)")
+        password = instance_admin_password(constellation)
+        ctx.mask(password)
+        executor.add_secret(password)
+        members = [distribution_source("drcsim"), distribution_source("cloudsim-router")]
+        root = distribution_source("cloudsim")
+        bundle = build_source_bundle(root, cache, config.machine_python, members)
+        secrets = {"cloudsim_admin_password": password}
+        contexts = {n: replace(c, app_bundle=bundle, secrets=secrets) for n, c in contexts.items()}
+    if "router" in used:
+        ctx.log("building the router's wheelhouse and the team VPN's keys")
+        material = server_material(constellation)
+        ctx.mask(material.server_key)
+        executor.add_secret(material.server_key)
+        router_wheels = build_wheelhouse(
+            distribution_source("cloudsim-router"), cache, config.machine_python
+        )
+        contexts = {
+            n: replace(c, vpn=material, router_wheelhouse=router_wheels)
+            if "router" in c.machine.plan
+            else c
+            for n, c in contexts.items()
+        }
+    return contexts
+
+
+@job_kind("constellation.refresh_vpn")
+def refresh_vpn(ctx: JobContext) -> None:
+    """Push the VPN's current keys and revocation list to the router (after a revocation)."""
+    constellation = _constellation(ctx)
+    if constellation.state != ConstellationState.READY:
+        ctx.log(
+            f"{constellation.name} is {constellation.state.value}: its next launch "
+            "applies the current revocation list"
+        )
+        return
+    config: Config = current_app.config["CLOUDSIM"]
+    kind = load_kind(constellation.kind, set(PLANS))
+    routers = [m for m in kind.machines if "router" in m.plan]
+    keys = constellation_keypair(constellation)
+    provider = open_provider(constellation.provider, config)
+    subnet = constellation.resources["subnet"]
+    with SSHExecutor(
+        MachineHostKeys(constellation), log_sink=ctx.line_sink(), secrets=[keys.private]
+    ) as executor:
+        reach = targets(constellation, provider.nodes(constellation.name), keys)
+        contexts = {
+            m.name: _plan_context(constellation, kind, m.name, subnet, config) for m in routers
+        }
+        ctx.stage("vpn", 30)
+        contexts = _with_software(ctx, executor, constellation, kind, contexts, config)
+        plans = {n: PLANS["router"](c) for n, c in contexts.items()}
+        _deploy(ctx, executor, {n: reach[n] for n in plans}, plans)
+
+
+def _network(driver: NetworkDriver, constellation: Constellation) -> Any:
+    return driver.ex_get_network(constellation.name)
+
+
+def ensure_network(
+    ctx: JobContext, driver: NetworkDriver, constellation: Constellation, kind: ConstellationKind
+) -> str:
+    """Create the private network once; return its subnet."""
+    existing = {n.name: n for n in driver.ex_list_networks()}
+    network = existing.get(constellation.name)
+    if network is None:
+        network = driver.ex_create_network(constellation.name)
+        ctx.log(f"created network {network.name} ({network.cidr})")
+    else:
+        ctx.log(f"network {network.name} ({network.cidr}) exists")
+    constellation.resources = {
+        **constellation.resources,
+        "network": network.name,
+        "subnet": network.cidr,
+    }
+    for machine in constellation.machines:
+        machine.private_ip = kind.machine(machine.name).address(network.cidr)
+    db.session.commit()
+    return str(network.cidr)
+
+
+def ensure_machines(
+    ctx: JobContext,
+    provider: Provider,
+    constellation: Constellation,
+    kind: ConstellationKind,
+    keys: KeyPair,
+    subnet: str,
+) -> list[Node]:
+    """Create every machine the provider does not have running; replace broken ones."""
+    driver = provider.driver
+    network = _network(driver, constellation)
+    have = {
+        node.extra["tags"].get("cloudsim:machine"): node
+        for node in provider.nodes(constellation.name)
+    }
+    wanted = list(kind.machines)
+    for definition in wanted:
+        node = have.get(definition.name)
+        if node is not None and node.state in BOOTING:
+            ctx.log(f"{definition.name}: still {node.state}; waiting for it")
+            have[definition.name] = driver.wait_until_running([node])[0][0]  # type: ignore[attr-defined]
+        elif node is not None and node.state != NodeState.RUNNING:
+            ctx.log(f"{definition.name}: found {node.state}; replacing it")
+            driver.destroy_node(node)
+            del have[definition.name]
+    missing = [m for m in wanted if m.name not in have]
+    rows = {m.name: m for m in constellation.machines}
+    for definition in missing:
+        rows[definition.name].state = MachineState.CREATING
+    db.session.commit()
+    image = provider.image()
+    sizes = {m.name: provider.size(m.size) for m in missing}
+    name = constellation.name  # plain values only: the threads have no database session
+
+    def create(definition: Any) -> Node:
+        return driver.create_node(
+            name=f"{name}-{definition.name}",
+            size=sizes[definition.name],
+            image=image,
+            auth=NodeAuthSSHKey(keys.public),
+            ex_network=network,
+            ex_private_ip=definition.address(subnet),
+            ex_public=definition.public,
+            ex_tags={
+                "cloudsim:constellation": name,
+                "cloudsim:machine": definition.name,
+                "cloudsim:role": definition.role,
+            },
+        )
+
+    created = _in_parallel(missing, create, lambda d: d.name)
+    log = ctx.line_sink()
+    for name, node in created.items():
+        log(name, f"created {node.id} ({', '.join(node.private_ips + node.public_ips)})")
+    nodes = {**have, **created}
+    for name, node in nodes.items():
+        row = rows[name]
+        row.provider_node_id = str(node.id)
+        row.public_ip = node.public_ips[0] if node.public_ips else None
+        # Providers of existing machines (servers) decide the address; clouds honour ours.
+        row.private_ip = node.private_ips[0] if node.private_ips else row.private_ip
+        row.state = MachineState.RUNNING
+    db.session.commit()
+    return list(nodes.values())
+
+
+def _in_parallel(
+    items: Sequence[Any], fn: Callable[[Any], T], key: Callable[[Any], str]
+) -> dict[str, T]:
+    """Call fn on every item in threads; raise one error naming every failure."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    if not items:
+        return {}
+    with ThreadPoolExecutor(max_workers=len(items)) as pool:
+        futures = {key(item): pool.submit(fn, item) for item in items}
+    failures = {name: f.exception() for name, f in futures.items() if f.exception()}
+    if failures:
+        raise ProvisioningError(
+            "; ".join(f"{name}: {error}" for name, error in sorted(failures.items()))
+        )
+    return {name: f.result() for name, f in futures.items()}
+
+
+def _plan_context(
+    constellation: Constellation, kind: ConstellationKind, name: str, subnet: str, config: Config
+) -> PlanContext:
+    return PlanContext(
+        constellation=constellation.name,
+        team=constellation.team.name if constellation.team else "",
+        kind=kind,
+        machine=kind.machine(name),
+        subnet=subnet,
+        addresses={m.name: m.private_ip or "" for m in constellation.machines},
+    )
+
+
+def _deploy(
+    ctx: JobContext,
+    executor: SSHExecutor,
+    reach: dict[str, Target],
+    plans: dict[str, list[PlanItem]],
+) -> None:
+    """Apply each machine's plan, all machines at once; fail naming every machine that failed."""
+    db.session.commit()  # worker threads write the log on their own connections
+
+    def deploy(target: Target) -> int:
+        changed = 0
+        for item in plans[target.name.rsplit("/", 1)[-1]]:
+            if isinstance(item, Action):
+                executor.log(target.name, f"[{item.name}]")
+                changed += item.run(executor, target)
+            else:
+                changed += apply(executor, target, item).changed
+        return changed
+
+    try:
+        outcome = executor.run_parallel(list(reach.values()), deploy)
+    except SSHError as exc:
+        raise ProvisioningError(str(exc)) from exc
+    ctx.log(", ".join(f"{name.rsplit('/', 1)[-1]}: {n} changed" for name, n in outcome.items()))
+
+
+@job_kind("constellation.terminate")
+def terminate_constellation(ctx: JobContext) -> None:
+    """Release every resource of a constellation; safe to run again and again."""
+    constellation = _constellation(ctx)
+    config: Config = current_app.config["CLOUDSIM"]
+    constellation.state = ConstellationState.TERMINATING
+    ctx.stage("machines", 10)
+    provider = open_provider(constellation.provider, config)
+    driver = provider.driver
+    nodes = provider.nodes(constellation.name)
+    for machine in constellation.machines:
+        machine.state = MachineState.TERMINATING
+    db.session.commit()
+    _in_parallel(nodes, lambda node: driver.destroy_node(node), lambda node: node.name)
+    ctx.log(f"destroyed {len(nodes)} machine(s)")
+    ctx.stage("network", 70)
+    network = {n.name: n for n in driver.ex_list_networks()}.get(constellation.name)
+    if network is not None:
+        driver.ex_destroy_network(network)
+        ctx.log(f"destroyed network {network.name}")
+    ctx.stage("keys", 90)
+    db.session.query(Secret).filter_by(
+        owner_type="constellation", owner_id=constellation.id
+    ).delete()
+    for machine in constellation.machines:
+        machine.state = MachineState.TERMINATED
+    constellation.state = ConstellationState.TERMINATED
+    ctx.stage("terminated", 100)

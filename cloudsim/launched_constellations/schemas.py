@@ -1,0 +1,45 @@
+"""Request and response schemas of the constellations API."""
+
+from __future__ import annotations
+
+from marshmallow import Schema, fields, validate
+
+from cloudsim.jobs.schemas import JobSchema
+
+
+class MachineSchema(Schema):
+    id = fields.Int()
+    name = fields.Str()
+    role = fields.Str()
+    state = fields.Str()
+    private_ip = fields.Str(allow_none=True)
+    public_ip = fields.Str(allow_none=True)
+    verification = fields.Dict()
+
+
+class ConstellationSchema(Schema):
+    id = fields.Int()
+    name = fields.Str()
+    kind = fields.Str()
+    provider = fields.Str()
+    team_id = fields.Int(allow_none=True)
+    state = fields.Str()
+    error = fields.Str(allow_none=True)
+    created_at = fields.DateTime()
+    machines = fields.List(fields.Nested(MachineSchema))
+
+
+class LaunchSchema(Schema):
+    name = fields.Str(required=True, validate=validate.Length(min=1, max=24))
+    kind = fields.Str(required=True, validate=validate.Length(min=1, max=32))
+    provider = fields.Str(load_default="local", validate=validate.Length(min=1, max=32))
+    team_id = fields.Int(allow_none=True, load_default=None)
+
+
+class LaunchedSchema(Schema):
+    constellation = fields.Nested(ConstellationSchema)
+    job = fields.Nested(JobSchema)
+
+
+class VpnBundleQuerySchema(Schema):
+    user_id = fields.Int(metadata={"description": "Officers: whose bundle (default: yours)"})

@@ -1,0 +1,208 @@
+"""Launch, terminate and look at constellations; every rule checked here for every caller."""
+
+from __future__ import annotations
+
+import io
+import re
+import zipfile
+
+from sqlalchemy import Select, select
+from sqlalchemy.orm import selectinload
+
+from cloudsim.audit.service import record
+from cloudsim.auth.policy import require_role, require_team_access
+from cloudsim.errors import Conflict, InvalidInput, NotFound
+from cloudsim.extensions import db
+from cloudsim.jobs.service import enqueue
+from cloudsim.launched_constellations.keys import constellation_keypair, instance_admin_password
+from cloudsim.models import Constellation, ConstellationState, Job, Machine, Role, Team, User
+from cloudsim.providers.service import PROVIDERS
+from constellations.definition import DefinitionError, load_kind
+from constellations.plans import PLANS
+from constellations.plans.roles import CLOUDSIM_ADMIN_EMAIL, CLOUDSIM_PORT
+
+NAME = re.compile(r"[a-z0-9]([a-z0-9-]{0,22}[a-z0-9])?\Z")
+BUSY = (ConstellationState.PENDING, ConstellationState.LAUNCHING, ConstellationState.TERMINATING)
+
+
+def visible_constellations(actor: User | None) -> Select[Constellation]:
+    """Return a query for the constellations the actor may see, newest first."""
+    query = (
+        select(Constellation)
+        .options(selectinload(Constellation.machines), selectinload(Constellation.team))
+        .order_by(Constellation.id.desc())
+    )
+    if actor is not None and not actor.has_role(Role.OFFICER):
+        query = query.where(
+            Constellation.team_id == actor.team_id, Constellation.team_id.is_not(None)
+        )
+    return query
+
+
+def get_constellation(actor: User | None, ref: int | str) -> Constellation:
+    """Return a constellation by id or name, if the actor may see it."""
+    if isinstance(ref, int) or ref.isdigit():
+        constellation = db.session.get(Constellation, int(ref))
+    else:
+        constellation = db.session.scalar(select(Constellation).where(Constellation.name == ref))
+    if constellation is None:
+        raise NotFound(f"constellation {ref} not found")
+    require_team_access(actor, constellation.team_id)
+    return constellation
+
+
+def latest_job(constellation: Constellation) -> Job | None:
+    """Return the constellation's most recent job."""
+    return db.session.scalar(
+        select(Job)
+        .where(Job.target_type == "constellation", Job.target_id == constellation.id)
+        .order_by(Job.created_at.desc())
+        .limit(1)
+    )
+
+
+def launch(
+    actor: User | None, *, name: str, kind: str, provider: str, team_id: int | None = None
+) -> tuple[Constellation, Job]:
+    """Record a new constellation and start the job that launches it (admins)."""
+    require_role(actor, Role.ADMIN, "launch constellations")
+    name = name.strip().lower()
+    if not NAME.match(name):
+        raise InvalidInput(
+            "constellation name must be 1-24 lowercase letters, digits or '-', "
+            "not starting or ending with '-'"
+        )
+    try:
+        definition = load_kind(kind, set(PLANS))
+    except DefinitionError as exc:
+        raise InvalidInput(str(exc)) from None
+    if provider not in PROVIDERS:
+        raise InvalidInput(f"unknown provider {provider!r}; known: {', '.join(PROVIDERS)}")
+    if team_id is not None and db.session.get(Team, team_id) is None:
+        raise NotFound(f"team {team_id} not found")
+    if db.session.scalar(select(Constellation.id).where(Constellation.name == name)):
+        raise Conflict(f"a constellation named {name!r} already exists")
+    constellation = Constellation(
+        name=name,
+        kind=kind,
+        provider=provider,
+        team_id=team_id,
+        created_by_id=actor.id if actor else None,
+    )
+    for machine in definition.machines:
+        constellation.machines.append(
+            Machine(name=machine.name, role=machine.role, size=machine.size)
+        )
+    db.session.add(constellation)
+    db.session.flush()
+    record(
+        "constellation.launch",
+        actor,
+        target_type="constellation",
+        target_id=constellation.id,
+        team_id=team_id,
+        name=name,
+        kind=kind,
+        provider=provider,
+    )
+    db.session.commit()
+    job = enqueue(
+        "constellation.launch",
+        actor,
+        target_type="constellation",
+        target_id=constellation.id,
+        team_id=team_id,
+    )
+    return constellation, job
+
+
+def retry(actor: User | None, ref: int | str) -> Job:
+    """Launch again a constellation that ended in error (resuming what exists)."""
+    require_role(actor, Role.ADMIN, "retry launches")
+    constellation = get_constellation(actor, ref)
+    if constellation.state != ConstellationState.ERROR:
+        raise Conflict(f"{constellation.name} is {constellation.state.value}, not in error")
+    constellation.state = ConstellationState.PENDING
+    return _start_job(actor, constellation, "constellation.retry", "constellation.launch")
+
+
+def terminate(actor: User | None, ref: int | str) -> Job:
+    """Start releasing every resource of a constellation (admins); safe to repeat."""
+    require_role(actor, Role.ADMIN, "terminate constellations")
+    constellation = get_constellation(actor, ref)
+    if constellation.state == ConstellationState.TERMINATED:
+        raise Conflict(f"{constellation.name} is already terminated")
+    running = latest_job(constellation)
+    if (
+        running is not None
+        and running.kind == "constellation.terminate"
+        and not running.state.final
+    ):
+        return running
+    constellation.state = ConstellationState.TERMINATING
+    return _start_job(actor, constellation, "constellation.terminate", "constellation.terminate")
+
+
+def _start_job(actor: User | None, constellation: Constellation, action: str, kind: str) -> Job:
+    """Audit an action on a constellation, commit it, and start the job that carries it out."""
+    record(
+        action,
+        actor,
+        target_type="constellation",
+        target_id=constellation.id,
+        team_id=constellation.team_id,
+    )
+    db.session.commit()
+    return enqueue(
+        kind,
+        actor,
+        target_type="constellation",
+        target_id=constellation.id,
+        team_id=constellation.team_id,
+    )
+
+
+def ssh_bundle(actor: User | None, ref: int | str) -> tuple[str, bytes]:
+    """Return (file name, zip) with the constellation's SSH key and how to use it (officers)."""
+    require_role(actor, Role.OFFICER, "download SSH keys")
+    constellation = get_constellation(actor, ref)
+    if constellation.state == ConstellationState.TERMINATED:
+        raise Conflict(f"{constellation.name} is terminated; its keys are gone")
+    keys = constellation_keypair(constellation)
+    lines = [f"SSH access to constellation {constellation.name} ({constellation.kind})", ""]
+    for machine in constellation.machines:
+        address = machine.public_ip or machine.private_ip or "(not created yet)"
+        lines.append(f"  {machine.name:8} {machine.role:8} {address}")
+    lines += [
+        "",
+        f"ssh -i {constellation.name}.key root@ADDRESS",
+        "Machines without a public address are reached through the router "
+        f"(ssh -J root@ROUTER -i {constellation.name}.key root@ADDRESS).",
+    ]
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as bundle:
+        key_info = zipfile.ZipInfo(f"{constellation.name}.key")
+        key_info.external_attr = 0o600 << 16
+        bundle.writestr(key_info, keys.private)
+        bundle.writestr(f"{constellation.name}.key.pub", keys.public + "\n")
+        bundle.writestr("README.txt", "\n".join(lines) + "\n")
+        if constellation.kind == "cloudsim":
+            server = next((m for m in constellation.machines if m.public_ip), None)
+            url = f"http://{server.public_ip}:{CLOUDSIM_PORT}/" if server else "(not created yet)"
+            bundle.writestr(
+                "cloudsim-admin.txt",
+                (
+                    f"CloudSim of {constellation.name}: {url}\n"
+                    f"admin: {CLOUDSIM_ADMIN_EMAIL}\n"
+                    f"password: {instance_admin_password(constellation)}\n"
+                ),
+            )
+    record(
+        "constellation.ssh_bundle",
+        actor,
+        target_type="constellation",
+        target_id=constellation.id,
+        team_id=constellation.team_id,
+    )
+    db.session.commit()
+    return f"{constellation.name}-ssh.zip", buffer.getvalue()

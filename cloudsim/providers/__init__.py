@@ -1,0 +1,18 @@
+"""Providers: where constellations run, and their settings (`cloudsim provider`)."""
+
+from __future__ import annotations
+
+import click
+from flask import Flask
+
+
+def init_app(app: Flask) -> None:
+    """Register this feature's pages, API and jobs with the app."""
+    del app  # nothing but commands
+
+
+def init_cli(cli: click.Group) -> None:
+    """Add this feature's commands to `cloudsim`."""
+    from cloudsim.providers.cli import provider
+
+    cli.add_command(provider)

@@ -1,0 +1,142 @@
+"""`cloudsim provider`: configure cloud providers (settings stored encrypted)."""
+
+from __future__ import annotations
+
+import sys
+from typing import TextIO
+
+import click
+import yaml
+
+from cloudsim.audit.service import record
+from cloudsim.cli import app_context, emit, reports_errors
+from cloudsim.errors import CloudSimError
+from cloudsim.extensions import db
+from cloudsim.providers.service import PROVIDERS, configure_provider, provider_settings
+
+
+@click.group()
+def provider() -> None:
+    """Configure and list the providers constellations can be launched on."""
+
+
+@provider.group("configure")
+def configure() -> None:
+    """Store a provider's settings, encrypted; launches use them from then on."""
+
+
+@configure.command("ec2")
+@click.option("--region", required=True, help="e.g. us-east-1")
+@click.option("--access-key", required=True, help="Access key id.")
+@click.option(
+    "--secret-key-stdin",
+    is_flag=True,
+    required=True,
+    help="Read the secret access key from standard input (never the command line).",
+)
+@click.option("--image", required=True, help="Machine image (AMI) every machine starts from.")
+@click.option(
+    "--size",
+    "sizes",
+    multiple=True,
+    metavar="LOGICAL=TYPE",
+    help="Instance type per logical size, e.g. gpu=g4dn.xlarge (repeatable).",
+)
+@click.option("--endpoint", help="An EC2-compatible API URL instead of AWS's.")
+@reports_errors
+def configure_ec2(
+    region: str,
+    access_key: str,
+    secret_key_stdin: bool,
+    image: str,
+    sizes: tuple[str, ...],
+    endpoint: str | None,
+) -> None:
+    """Amazon EC2 (or an EC2-compatible API): credentials, region, image, instance types."""
+    secret = sys.stdin.readline().strip()
+    size_map = {}
+    for item in sizes:
+        logical, _, instance_type = item.partition("=")
+        if not logical or not instance_type:
+            raise click.BadParameter(f"{item!r} is not LOGICAL=TYPE", param_hint="--size")
+        size_map[logical] = instance_type
+    with app_context():
+        settings = {
+            "access_key": access_key,
+            "secret_key": secret,
+            "region": region,
+            "image": image,
+            "sizes": size_map,
+        }
+        if endpoint:
+            settings["endpoint"] = endpoint
+        configure_provider("ec2", settings)
+        record(
+            "provider.configure",
+            None,
+            target_type="provider",
+            target_id="ec2",
+            region=region,
+            image=image,
+        )
+        db.session.commit()
+        click.echo(f"ec2 configured (region {region}, image {image})")
+
+
+@configure.command("servers")
+@click.option(
+    "--inventory",
+    "inventory_file",
+    required=True,
+    type=click.File("r"),
+    help="YAML list of servers (name, address, private_ip, network, cidr, "
+    "private_key, ...); see provisioners/servers/README.md.",
+)
+@reports_errors
+def configure_servers(inventory_file: TextIO) -> None:
+    """Existing machines reachable by SSH (e.g. bare-metal servers), from an inventory file."""
+    try:
+        inventory = yaml.safe_load(inventory_file)
+    except yaml.YAMLError as exc:
+        raise click.ClickException(f"{inventory_file.name}: not YAML: {exc}") from None
+    if not isinstance(inventory, list):
+        raise click.ClickException(f"{inventory_file.name}: expected a list of servers")
+    with app_context():
+        configure_provider("servers", {"inventory": inventory})
+        record(
+            "provider.configure",
+            None,
+            target_type="provider",
+            target_id="servers",
+            servers=len(inventory),
+        )
+        db.session.commit()
+        click.echo(
+            f"servers configured ({len(inventory)} servers); keep the file safe or "
+            "delete it: the keys are now stored encrypted"
+        )
+
+
+@provider.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def list_providers(as_json: bool) -> None:
+    """List providers and whether each is ready to use (secrets are never shown)."""
+    with app_context():
+        rows: list[dict[str, str | bool | None]] = []
+        for name in PROVIDERS:
+            if name == "local":
+                rows.append({"name": name, "configured": True, "region": None})
+                continue
+            try:
+                settings = provider_settings(name)
+            except CloudSimError:
+                rows.append({"name": name, "configured": False, "region": None})
+            else:
+                rows.append({"name": name, "configured": True, "region": settings.get("region")})
+        lines = "\n".join(
+            f"{r['name']}\t{'configured' if r['configured'] else 'not configured'}"
+            f"\t{r['region'] or ''}".rstrip()
+            for r in rows
+        )
+        emit(rows, as_json, lines)

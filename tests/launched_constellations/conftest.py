@@ -1,0 +1,86 @@
+"""Fixtures for constellation tests on the local provider: a private prefix, a worker."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from celery.contrib.testing.worker import start_worker
+from flask import Flask
+
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.models import Job
+from cloudsim.providers.service import open_provider
+from tests.conftest import running_app
+from tests.support.servers import wait_for
+
+PREFIX = f"cf{os.getpid() % 100000}"
+
+
+@pytest.fixture
+def constellations_config(make_config: Callable[..., Config]) -> Config:
+    if os.geteuid() != 0:
+        pytest.fail("constellation tests need root (the local provider makes namespaces)")
+    return make_config(
+        local_prefix=PREFIX,
+        local_subnet_pool="10.213.0.0/16",
+        local_public_cidr="198.18.13.0/24",
+        job_lease_seconds=5,
+    )
+
+
+@pytest.fixture
+def constellations_app(constellations_config: Config) -> Iterator[Flask]:
+    with running_app(constellations_config) as app:
+        try:
+            yield app
+        finally:
+            destroy_everything(constellations_config)
+
+
+def destroy_everything(config: Config) -> None:
+    """Remove every host and network a test made, even when it failed half-way."""
+    driver = open_provider("local", config).driver
+    driver.ex_sweep()  # type: ignore[attr-defined]
+
+
+@pytest.fixture
+def constellations_worker(constellations_app: Flask) -> Iterator[None]:
+    with start_worker(
+        constellations_app.extensions["celery"],
+        pool="threads",
+        concurrency=3,
+        perform_ping_check=False,
+        loglevel="WARNING",
+        shutdown_timeout=30,
+    ):
+        yield
+
+
+def finished(job_id: str, timeout: float = 600) -> Job:
+    """Wait for a job to reach a final state and return its row, freshly read."""
+
+    def final() -> Job | None:
+        db.session.expire_all()
+        job = db.session.get(Job, job_id)
+        return job if job is not None and job.state.final else None
+
+    return wait_for(final, timeout, f"job {job_id}")  # type: ignore[return-value]
+
+
+def leftovers(config: Config) -> dict[str, list[str]]:
+    """Return every namespace, mount and state file the local provider left with our prefix."""
+    netns = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
+    mounts = Path("/proc/mounts").read_text()
+    state = config.instance_dir / "local-hosts"
+    return {
+        "netns": [line.split()[0] for line in netns.splitlines() if line.startswith(PREFIX)],
+        "mounts": [line for line in mounts.splitlines() if str(state) in line],
+        "files": [str(p) for p in state.rglob("*") if p.is_file() and "lock" not in p.name]
+        if state.exists()
+        else [],
+    }
