@@ -1,4 +1,4 @@
-"""The drcsim command: serve, replay, selftest, bench, example-controller, worlds."""
+"""The drcsim command: serve, replay, selftest, bench, ladder, example-controller, worlds."""
 
 from __future__ import annotations
 
@@ -110,13 +110,31 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_ladder(args: argparse.Namespace) -> int:
+    """Run the reference controllers over the worlds and configurations; print the table."""
+    from drcsim.ladder import run_ladder
+
+    result = run_ladder(args.controller, args.world, args.config, args.time_limit, args.jobs)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        for row in result["runs"]:
+            print(
+                f"{row['controller']:<8} {row['world']} {row['config']} "
+                f"{row['checkpoints']}/4 falls={row['falls']} {row['reason']}"
+            )
+        for style, total in result["totals"].items():
+            print(f"{style:<8} {total['checkpoints']}/{total['of']} falls={total['falls']}")
+    return 0
+
+
 def cmd_example(args: argparse.Namespace) -> int:
-    """Run the example team controller against a server."""
+    """Run a reference team controller (the example one by default) against a server."""
     from drcsim.client import SimClient
-    from drcsim.example_controller import ExampleController
+    from drcsim.controllers import CONTROLLERS
 
     with SimClient(args.server, args.port, timeout_s=10.0) as client:
-        controller = ExampleController(
+        controller = CONTROLLERS[args.style](
             client, log=lambda line: print(line, file=sys.stderr), timeout_s=args.timeout
         )
         if args.world and controller.info["world"] != args.world:
@@ -193,7 +211,16 @@ def build_parser() -> argparse.ArgumentParser:
     example.add_argument("--port", type=int, default=7700)
     example.add_argument("--world", choices=WORLD_NAMES)
     example.add_argument("--timeout", type=float, default=900.0, help="wall seconds")
+    example.add_argument("--style", default="example", choices=["naive", "example", "careful"])
     example.set_defaults(func=cmd_example)
+    ladder = sub.add_parser("ladder", help="reference controllers x worlds x configurations")
+    ladder.add_argument("--controller", action="append", choices=["naive", "example", "careful"])
+    ladder.add_argument("--world", action="append", choices=WORLD_NAMES)
+    ladder.add_argument("--config", action="append", choices=CONFIG_NAMES)
+    ladder.add_argument("--time-limit", type=float, default=600.0, help="simulated s per run")
+    ladder.add_argument("--jobs", type=int, default=None, help="parallel runs (default: cores)")
+    ladder.add_argument("--json", action="store_true")
+    ladder.set_defaults(func=cmd_ladder)
     follow = sub.add_parser("watch", help="print a running server's poses and score")
     follow.add_argument("--server", required=True)
     follow.add_argument("--port", type=int, default=7700)

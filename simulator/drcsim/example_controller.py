@@ -31,6 +31,15 @@ def _yaw(orientation: list[float]) -> float:
 class ExampleController:
     """Runs one task to completion (or as far as it gets) over a SimClient or a LocalClient."""
 
+    # What the reference controllers (drcsim.controllers) vary: how hard they drive, how
+    # they steer, how far past a gate they aim, where they feel for objects, and whether
+    # they come to the driver door from the side.
+    throttle = 0.7
+    steer_gain = 7.5
+    walk_past = 1.0
+    search = SEARCH
+    approach_door = True
+
     def __init__(self, client: CommandAPI, log: Log = lambda _: None, timeout_s: float = 600.0):
         self.client = client
         self.log = log
@@ -115,7 +124,8 @@ class ExampleController:
         """Task 2: walk through each gate in turn."""
         for name in sorted(course["gates"]):
             gx, gy, gyaw = course["gates"][name]["pose"]
-            state = self.walk(gx + 1.0 * math.cos(gyaw), gy + 1.0 * math.sin(gyaw), gyaw)
+            past = self.walk_past
+            state = self.walk(gx + past * math.cos(gyaw), gy + past * math.sin(gyaw), gyaw)
             self.log(f"{name}: {state['score']}")
             if state["score"]["ended"]:
                 return
@@ -124,8 +134,9 @@ class ExampleController:
         """Task 1: get in, drive through both gates, stop, get out, walk to the finish."""
         door = course["vehicle"]["driver_door"]
         car_yaw = course["vehicle"]["pose"][2]
-        # Come to the door from the side, not through the vehicle.
-        self.walk(door[0] - 2.5 * math.cos(car_yaw), door[1] - 2.5 * math.sin(car_yaw), car_yaw)
+        if self.approach_door:  # come to the door from the side, not through the vehicle
+            c, s = math.cos(car_yaw), math.sin(car_yaw)
+            self.walk(door[0] - 2.5 * c, door[1] - 2.5 * s, car_yaw)
         self.walk(door[0], door[1], car_yaw)
         self.client.behaviour("enter_vehicle")
         self.log(f"seated: {self.advance(0.5)['score']}")
@@ -137,7 +148,8 @@ class ExampleController:
         self.advance(2.0)
         self.client.behaviour("exit_vehicle")
         gx, gy, gyaw = course["gates"]["gate_3"]["pose"]
-        self.walk(gx + 1.0 * math.cos(gyaw), gy + 1.0 * math.sin(gyaw), gyaw)
+        past = self.walk_past
+        self.walk(gx + past * math.cos(gyaw), gy + past * math.sin(gyaw), gyaw)
 
     def _drive_through(self, tx: float, ty: float, limit_s: float = 60.0) -> None:
         state = self.client.state()
@@ -152,8 +164,8 @@ class ExampleController:
             self.client.behaviour(
                 "drive",
                 direction="forward",
-                throttle=0.7,
-                steering_wheel=max(-3.0, min(3.0, 7.5 * error)),
+                throttle=self.throttle,
+                steering_wheel=max(-3.0, min(3.0, self.steer_gain * error)),
             )
             state = self.advance(0.1)
 
@@ -165,7 +177,7 @@ class ExampleController:
         table_x = course["table"]["pose"][0]
         self.walk(hose[0] - 0.45, hose[1] + 0.3, 0.0)
         # The briefing is rough: feel for the coupler around where it should be.
-        for dx, dy in SEARCH:
+        for dx, dy in self.search:
             self.reach("right", [hose[0] - 0.25 + dx, hose[1] + dy, hose[2] + 0.3])
             self.reach("right", [hose[0] + dx, hose[1] + dy, hose[2] + 0.04])
             grasped = self.client.behaviour("grasp", hand="right").get("grasped")
@@ -186,7 +198,7 @@ class ExampleController:
 
         self.walk(*near(inlet, -0.45, 0.3), pipe_yaw)
         # Line the coupler up in front of the inlet, then push it home.
-        for dx, dy in SEARCH:
+        for dx, dy in self.search:
             self.reach("right", [*near(inlet, -0.15 + dx, dy), inlet[2]], tool=True)
             self.reach("right", [*near(inlet, dx, dy), inlet[2]], tool=True, limit_s=6.0)
             state = self.advance(1.0)

@@ -39,3 +39,31 @@ def test_bench_reports_every_world_and_the_round_trip() -> None:
 def test_unknown_world_is_a_one_line_error() -> None:
     done = _drcsim("serve", "--world", "vrc_task_7")
     assert done.returncode != 0 and "invalid choice" in done.stderr
+
+
+def test_ladder_runs_reference_controllers_over_the_network_and_prints_the_table() -> None:
+    done = _drcsim(
+        "ladder",
+        "--json",
+        "--controller",
+        "naive",
+        "--controller",
+        "careful",
+        "--world",
+        "vrc_task_2",
+        "--config",
+        "1",
+        "--time-limit",
+        "8",
+        "--jobs",
+        "2",
+    )
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert {(r["controller"], r["world"], r["config"]) for r in result["runs"]} == {
+        ("naive", "vrc_task_2", "1"),
+        ("careful", "vrc_task_2", "1"),
+    }
+    for row in result["runs"]:
+        assert row["reason"] in ("time_limit", "complete") and 0 <= row["checkpoints"] <= 4
+    assert result["totals"]["naive"]["of"] == 4 and result["jobs"] == 2
