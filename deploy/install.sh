@@ -35,7 +35,11 @@ fi
 vendor=templates/web/static/vendor
 npm_digest=$(cat package.json package-lock.json | sha256sum | cut -c1-16)
 if [ ! -f "$vendor/.stamp" ] || [ "$(cat "$vendor/.stamp")" != "$npm_digest" ]; then
-    command -v npm >/dev/null || { echo "install: npm is missing (Debian/nodesource nodejs)" >&2; exit 1; }
+    if ! command -v npm >/dev/null; then
+        # Debian's nodejs comes without npm (nodesource's carries it): add Debian's npm
+        [ "$(id -u)" = 0 ] || { echo "install: npm is missing; install it (apt-get install npm)" >&2; exit 1; }
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends npm >/dev/null
+    fi
     echo "install: npm ci (three.js)"
     npm ci --no-audit --no-fund --ignore-scripts --loglevel=error
     mkdir -p "$vendor/three"
