@@ -25,12 +25,14 @@ from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Run, RunState, User
 from cloudsim.viewer.service import live_run_for
-from provisioners.ssh import SSHError
+from provisioners.ssh import Machine as Target
+from provisioners.ssh import SSHError, SSHExecutor
 
 log = logging.getLogger(__name__)
 BUFFER_SECONDS = 10  # of simulated time kept for viewers
 VIEWER_TTL_S = 15  # a viewer that has not polled this long no longer counts
 RELAY_LEASE_S = 20  # a relay that has not renewed this long is presumed dead
+SIM_COMMAND_PORT = 7700  # drcsim serve's default, which the run's simulator uses
 WATCH_CHUNK_S = 120  # one `drcsim watch` call; the relay starts another while viewers remain
 CHECK_EVERY_S = 1.0
 RETRY_AFTER_FAILURE_S = 30
@@ -137,7 +139,8 @@ class _Relay:
     def __init__(self, run: Run, client: redis.Redis, config: Config) -> None:
         self.run_id = run.id
         self.client = client
-        self.keep = BUFFER_SECONDS * config.viewer_live_hz
+        self.hz = config.viewer_live_hz
+        self.keep = BUFFER_SECONDS * self.hz
         self.checked = 0.0
         self.frames = 0
 
@@ -166,6 +169,37 @@ class _Relay:
             raise _RelayDone
 
 
+def follow_simulator(
+    executor: SSHExecutor,
+    sim: Target,
+    sim_ip: str,
+    relay: _Relay,
+    *,
+    drcsim: str = DRCSIM,
+    port: int = SIM_COMMAND_PORT,
+    chunk_s: int = WATCH_CHUNK_S,
+) -> None:
+    """Run `drcsim watch` on the sim machine, chunk after chunk, until the relay stops.
+
+    The executor's log sink must be `relay.line`: it gets the watcher's output line by line
+    as it arrives.
+    """
+    command = (
+        f"{shlex.quote(drcsim)} watch --server {shlex.quote(sim_ip)} --port {port} "
+        f"--rate {relay.hz} --seconds {chunk_s}"
+    )
+    try:
+        while True:
+            relay.check()
+            try:
+                executor.run(sim, command, timeout=chunk_s + 30)
+            except SSHError:
+                relay.check()  # the run ended under the watcher: that is no failure
+                raise
+    except _RelayDone:
+        return
+
+
 @job_kind("viewer.relay")
 def relay_job(ctx: JobContext) -> None:
     """Follow a running run's poses on its sim machine while anybody watches it live."""
@@ -178,21 +212,10 @@ def relay_job(ctx: JobContext) -> None:
     ctx.stage("relay", 50)
     try:
         with machines(run, config, sink=relay.line) as reach:
-            command = (
-                f"{DRCSIM} watch --server {shlex.quote(reach.sim_ip)} "
-                f"--rate {config.viewer_live_hz} --seconds {WATCH_CHUNK_S}"
-            )
-            while True:
-                relay.check()
-                try:
-                    reach.executor.run(reach.sim, command, timeout=WATCH_CHUNK_S + 30)
-                except SSHError:
-                    relay.check()  # the run ended under the watcher: that is no failure
-                    raise
-    except _RelayDone:
-        client.delete(_key(run.id, "relay"))
+            follow_simulator(reach.executor, reach.sim, reach.sim_ip, relay)
     except Exception:
         # viewers keep asking: the next relay starts after a pause, not at every poll
         client.set(_key(run.id, "relay"), "failed", ex=RETRY_AFTER_FAILURE_S)
         raise
+    client.delete(_key(run.id, "relay"))
     ctx.log(f"relayed {relay.frames} frame(s) of run {run.id}; nobody watches any more")
