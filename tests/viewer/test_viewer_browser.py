@@ -52,10 +52,13 @@ def test_a_team_replays_its_run_where_the_state_log_says(
     assert user is not None and user.team is not None
     run = store_run(user.team, run_logs)
     _add_bandwidth_log(run, tmp_path)
-    page = webgl_browser.new_context(viewport={"width": 1280, "height": 1000}).new_page()
+    context = webgl_browser.new_context(viewport={"width": 1280, "height": 1000})
+    page = context.new_page()
     hosts: set[str] = set()
-    page.on("request", lambda request: hosts.add(urlsplit(request.url).netloc))
+    context.on("request", lambda request: hosts.add(urlsplit(request.url).netloc))
     log_in_page(page, live_url, user)
+    run_page = context.new_page()  # the run's page stays open in another tab
+    run_page.goto(f"{live_url}/runs/{run.id}")
     page.goto(f"{live_url}/runs/{run.id}")
     page.get_by_role("link", name="Replay in 3D").click()
     page.wait_for_function("window.cloudsimViewer && window.cloudsimViewer.ready", timeout=60_000)
@@ -82,9 +85,12 @@ def test_a_team_replays_its_run_where_the_state_log_says(
     mark.click()
     page.wait_for_function(f"Math.abs(cloudsimViewer.t - {when}) < 0.04")
     markers = page.locator("#viewer-bandwidth line.replay-mark")
-    expect(markers.first).to_have_attribute(
-        "data-second", str(int(page.evaluate("cloudsimViewer.t")))
-    )
+    second = str(int(page.evaluate("cloudsimViewer.t")))
+    expect(markers.first).to_have_attribute("data-second", second)
+    # and so do the charts on the run's page in the other tab
+    on_run_page = run_page.locator("section.charts line.replay-mark")
+    expect(on_run_page).to_have_count(4)
+    expect(on_run_page.first).to_have_attribute("data-second", second)
 
     # play at 8x: a real second moves the replay several simulated seconds
     page.evaluate("cloudsimViewer.seek(0)")

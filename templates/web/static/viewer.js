@@ -156,25 +156,14 @@ function drawMarks(marks, duration) {
   }
 }
 
-const bandwidthMarks = [];
-for (const svg of document.querySelectorAll("#viewer-bandwidth svg.chart")) {
-  const line = document.createElementNS("http://www.w3.org/2000/svg", "line");
-  line.setAttribute("class", "replay-mark");
-  line.setAttribute("stroke", "#8250df");
-  line.setAttribute("stroke-width", "2");
-  line.setAttribute("y1", svg.dataset.y0);
-  line.setAttribute("y2", svg.dataset.y1);
-  svg.append(line);
-  bandwidthMarks.push([svg, line]);
-}
+const replayChannel = window.cloudsimReplayMark.channel(box.dataset.runId);
+const bandwidthCharts = document.getElementById("viewer-bandwidth");
+let markedSecond = null;
 function markBandwidth(t) {
-  // the run runs at real time, so second N of the router's log is about simulated second N
-  for (const [svg, line] of bandwidthMarks) {
-    const x0 = +svg.dataset.x0, x1 = +svg.dataset.x1, xMax = +svg.dataset.xMax;
-    const x = x0 + ((x1 - x0) * Math.min(t, xMax)) / xMax;
-    line.setAttribute("x1", x.toFixed(1));
-    line.setAttribute("x2", x.toFixed(1));
-    line.dataset.second = Math.floor(t);
+  if (bandwidthCharts) window.cloudsimReplayMark.markCharts(bandwidthCharts, t);
+  if (replayChannel && mode === "replay" && Math.floor(t) !== markedSecond) {
+    markedSecond = Math.floor(t);
+    replayChannel.postMessage({ t }); // the run's page marks the same second on its charts
   }
 }
 
