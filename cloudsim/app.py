@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 from datetime import timedelta
 from typing import Any
 
@@ -14,6 +15,8 @@ from cloudsim.auth.passwords import Passwords
 from cloudsim.config import Config
 from cloudsim.crypto import Keyring
 from cloudsim.extensions import csrf, db, limiter, login_manager
+from cloudsim.web.inputs import init_inputs
+from cloudsim.web.security import init_security
 
 
 def create_app(config: Config | None = None) -> Flask:
@@ -42,8 +45,9 @@ def create_app(config: Config | None = None) -> Flask:
         WTF_CSRF_TIME_LIMIT=None,  # the token lives as long as the session
         RATELIMIT_STORAGE_URI=config.effective_redis_url,
         RATELIMIT_HEADERS_ENABLED=True,
-        MAX_CONTENT_LENGTH=2 * 1024 * 1024,
     )
+    init_inputs(app)  # before any route: their <int:...> converters are bound when added
+    init_security(app, config)
     logging.getLogger("cloudsim").setLevel(config.log_level)
     app.extensions["cloudsim.keyring"] = Keyring(config.encryption_keys)
     app.extensions["cloudsim.passwords"] = Passwords(
@@ -53,6 +57,7 @@ def create_app(config: Config | None = None) -> Flask:
     db.init_app(app)
     if config.database_url.startswith("sqlite"):
         with app.app_context():
+            _private_database_file(db.engine.url.database)
             event.listen(db.engine, "connect", _sqlite_pragmas)
     csrf.init_app(app)
     limiter.init_app(app)
@@ -75,6 +80,14 @@ def _engine_options(url: str) -> dict[str, Any]:
     if url.startswith("sqlite"):
         return {"connect_args": {"timeout": 30}}
     return {"pool_pre_ping": True}
+
+
+def _private_database_file(path: str | None) -> None:
+    """Create the SQLite file readable by its owner only (its -wal and -shm files follow it)."""
+    if not path or path == ":memory:":
+        return
+    os.close(os.open(path, os.O_RDWR | os.O_CREAT, 0o600))
+    os.chmod(path, 0o600)
 
 
 def _sqlite_pragmas(dbapi_connection: Any, _record: Any) -> None:

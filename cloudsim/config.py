@@ -202,7 +202,9 @@ class Config:
 
         instance_dir = Path(str(overrides.pop("instance_dir", get("CLOUDSIM_INSTANCE_DIR"))))
         instance_dir = instance_dir.expanduser().resolve()
-        instance_dir.mkdir(parents=True, exist_ok=True)
+        # Keys, the database and logs live here: no other local user may read them.
+        instance_dir.mkdir(mode=0o700, parents=True, exist_ok=True)
+        instance_dir.chmod(0o700)
         try:
             secure = _bool(get("CLOUDSIM_SECURE_COOKIES"))
         except ValueError as exc:

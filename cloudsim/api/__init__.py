@@ -6,6 +6,7 @@ from flask import Flask
 from flask_smorest import Api, Blueprint
 
 from cloudsim.extensions import csrf
+from cloudsim.web.inputs import IdConverter, id_param_schema
 
 API_PREFIX = "/api/v1"
 PUBLIC_PATHS = {f"{API_PREFIX}/openapi.json"}
@@ -30,6 +31,7 @@ def init_api(app: Flask) -> Api:
     )
     api = Api(app)
     app.extensions["cloudsim.api"] = api
+    api.register_converter(IdConverter, id_param_schema)
     return api
 
 

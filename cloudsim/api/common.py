@@ -4,13 +4,33 @@ from __future__ import annotations
 
 from typing import Any
 
-from flask import g
+import flask_smorest
+from flask import Request, g
 from flask_smorest import Page
 from sqlalchemy import Select, func, select
+from webargs import core
+from webargs.flaskparser import FlaskParser, is_json_request
 
 from cloudsim.auth.policy import require_role
 from cloudsim.extensions import db
 from cloudsim.models import Role, User
+from cloudsim.web.inputs import INT64_MAX
+
+
+class BodyParser(FlaskParser):
+    """webargs, reading JSON bodies through the app's bounded parser (cloudsim.web.inputs)."""
+
+    def _raw_load_json(self, req: Request) -> Any:
+        if not is_json_request(req):
+            return core.missing
+        return req.get_json(force=True)  # refusals answer 400 with the reason
+
+
+class Blueprint(flask_smorest.Blueprint):  # type: ignore[misc]
+    """An API blueprint whose arguments are parsed by BodyParser."""
+
+    ARGUMENTS_PARSER = BodyParser()
+    PAGINATION_ARGUMENTS_PARSER = BodyParser()
 
 
 def caller() -> User:
@@ -36,6 +56,8 @@ class SelectPage(Page):  # type: ignore[misc]
     @property
     def items(self) -> list[Any]:
         params = self.page_params
+        if params.first_item > INT64_MAX:  # a page far past the end: nothing, not an overflow
+            return []
         return list(
             db.session.scalars(self.collection.offset(params.first_item).limit(params.page_size))
         )

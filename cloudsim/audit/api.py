@@ -5,9 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 from flask.views import MethodView
-from flask_smorest import Blueprint
 
-from cloudsim.api.common import SelectPage, caller_with
+from cloudsim.api.common import Blueprint, SelectPage, caller_with
 from cloudsim.audit.schemas import AuditEventSchema, AuditQuerySchema
 from cloudsim.audit.service import visible_events
 from cloudsim.models import Role

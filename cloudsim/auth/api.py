@@ -7,10 +7,9 @@ from typing import Any
 from flask import Flask, g, request
 from flask.typing import ResponseReturnValue
 from flask.views import MethodView
-from flask_smorest import Blueprint
 
 from cloudsim.api import API_PREFIX, PUBLIC_PATHS
-from cloudsim.api.common import caller, columns
+from cloudsim.api.common import Blueprint, caller, columns
 from cloudsim.auth.schemas import IssuedTokenSchema, TokenSchema
 from cloudsim.auth.tokens import issue_token, revoke_token, user_for_token
 from cloudsim.people.schemas import UserSchema

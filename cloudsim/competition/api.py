@@ -6,14 +6,14 @@ from typing import Any
 
 from flask import current_app
 from flask.views import MethodView
-from flask_smorest import Blueprint
 from marshmallow import Schema, fields, validate
 
-from cloudsim.api.common import SelectPage, caller
+from cloudsim.api.common import Blueprint, SelectPage, caller
 from cloudsim.competition import runs as run_service
 from cloudsim.competition import schedule, season
 from cloudsim.competition.artifacts import LogStore
 from cloudsim.web.downloads import attachment
+from cloudsim.web.inputs import INT64_MAX, Id, Int
 
 blp = Blueprint("api_competition", __name__, description="Tasks, runs, logs and scores")
 
@@ -37,19 +37,19 @@ class TaskSchema(Schema):
 class TaskCreateSchema(Schema):
     name = fields.Str(required=True, validate=validate.Length(min=1, max=120))
     world = fields.Str(required=True, validate=validate.Length(min=1, max=64))
-    run_config = fields.Int(load_default=1)
+    run_config = Int(load_default=1)
     start = fields.Str(
         required=True, metadata={"description": "Wall-clock time in time_zone, or ISO 8601"}
     )
     stop = fields.Str(required=True)
     time_zone = fields.Str(load_default="UTC", validate=validate.Length(min=1, max=64))
-    timeout_s = fields.Int(load_default=schedule.DEFAULT_TIMEOUT_S)
-    latency_ms = fields.Int(load_default=schedule.DEFAULT_LATENCY_MS)
-    uplink_bits = fields.Int(load_default=schedule.DEFAULT_UPLINK_BITS)
-    downlink_bits = fields.Int(load_default=schedule.DEFAULT_DOWNLINK_BITS)
-    order = fields.Int(load_default=0)
+    timeout_s = Int(load_default=schedule.DEFAULT_TIMEOUT_S)
+    latency_ms = Int(load_default=schedule.DEFAULT_LATENCY_MS)
+    uplink_bits = Int(load_default=schedule.DEFAULT_UPLINK_BITS, maximum=INT64_MAX)
+    downlink_bits = Int(load_default=schedule.DEFAULT_DOWNLINK_BITS, maximum=INT64_MAX)
+    order = Int(load_default=0)
     team_ids = fields.List(
-        fields.Int(),
+        Id(),
         load_default=None,
         allow_none=True,
         metadata={"description": "Teams to schedule it for; null or left out: every team"},
@@ -61,7 +61,7 @@ class SeasonSchema(Schema):
 
 
 class StartSchema(Schema):
-    constellation_id = fields.Int(load_default=None, allow_none=True)
+    constellation_id = Id(load_default=None, allow_none=True)
 
 
 class ScoreEventSchema(Schema):

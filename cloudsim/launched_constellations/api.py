@@ -5,9 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 from flask.views import MethodView
-from flask_smorest import Blueprint
 
-from cloudsim.api.common import SelectPage, caller
+from cloudsim.api.common import Blueprint, SelectPage, caller
 from cloudsim.jobs.schemas import JobSchema
 from cloudsim.launched_constellations import service, vpn
 from cloudsim.launched_constellations.schemas import (

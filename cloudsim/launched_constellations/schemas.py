@@ -5,6 +5,7 @@ from __future__ import annotations
 from marshmallow import Schema, fields, validate
 
 from cloudsim.jobs.schemas import JobSchema
+from cloudsim.web.inputs import Id
 
 
 class MachineSchema(Schema):
@@ -33,7 +34,7 @@ class LaunchSchema(Schema):
     name = fields.Str(required=True, validate=validate.Length(min=1, max=24))
     kind = fields.Str(required=True, validate=validate.Length(min=1, max=32))
     provider = fields.Str(load_default="local", validate=validate.Length(min=1, max=32))
-    team_id = fields.Int(allow_none=True, load_default=None)
+    team_id = Id(allow_none=True, load_default=None)
 
 
 class LaunchedSchema(Schema):
@@ -42,4 +43,4 @@ class LaunchedSchema(Schema):
 
 
 class VpnBundleQuerySchema(Schema):
-    user_id = fields.Int(metadata={"description": "Officers: whose bundle (default: yours)"})
+    user_id = Id(metadata={"description": "Officers: whose bundle (default: yours)"})

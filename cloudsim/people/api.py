@@ -5,9 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 from flask.views import MethodView
-from flask_smorest import Blueprint
 
-from cloudsim.api.common import caller, caller_with, columns
+from cloudsim.api.common import Blueprint, caller, caller_with, columns
 from cloudsim.models import Role
 from cloudsim.people import service
 from cloudsim.people.schemas import (

@@ -5,6 +5,7 @@ from __future__ import annotations
 from marshmallow import Schema, fields, validate
 
 from cloudsim.models import Role
+from cloudsim.web.inputs import Id
 
 
 class TeamSchema(Schema):
@@ -20,7 +21,7 @@ class UserSchema(Schema):
     role = fields.Str(
         load_default=Role.USER.value, validate=validate.OneOf([r.value for r in Role])
     )
-    team_id = fields.Int(allow_none=True, load_default=None)
+    team_id = Id(allow_none=True, load_default=None)
     active = fields.Bool(dump_only=True)
     created_at = fields.DateTime(dump_only=True)
     last_login_at = fields.DateTime(dump_only=True)
@@ -39,6 +40,6 @@ class UserCreatedSchema(UserSchema):
 class UserUpdateSchema(Schema):
     name = fields.Str(validate=validate.Length(max=120))
     role = fields.Str(validate=validate.OneOf([r.value for r in Role]))
-    team_id = fields.Int(allow_none=True)
+    team_id = Id(allow_none=True)
     active = fields.Bool()
     password = fields.Str(load_only=True, validate=validate.Length(max=256))

@@ -6,10 +6,9 @@ from typing import Any
 
 from flask import Response, current_app
 from flask.views import MethodView
-from flask_smorest import Blueprint
 from marshmallow import Schema, fields, validate
 
-from cloudsim.api.common import caller
+from cloudsim.api.common import Blueprint, caller
 from cloudsim.viewer import live, service
 
 blp = Blueprint("api_viewer", __name__, description="A run in 3D: scene, replay and live frames")

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from flask import Flask, render_template, request
+from flask import Flask, current_app, render_template, request
 from flask.typing import ResponseReturnValue
 from flask_wtf.csrf import CSRFError
+from markupsafe import escape
 from werkzeug.exceptions import HTTPException
 
 from cloudsim.errors import CloudSimError
@@ -32,7 +33,7 @@ def register_web(app: Flask) -> None:
 
     @app.errorhandler(CloudSimError)
     def service_error(exc: CloudSimError) -> ResponseReturnValue:
-        db.session.rollback()
+        _rollback()
         return _error_page(exc.status, str(exc))
 
     @app.errorhandler(CSRFError)
@@ -53,7 +54,7 @@ def register_web(app: Flask) -> None:
     @app.errorhandler(Exception)
     def crash(exc: Exception) -> ResponseReturnValue:
         app.logger.exception("unhandled error on %s %s", request.method, request.path)
-        db.session.rollback()
+        _rollback()
         return _error_page(500, MESSAGES[500])
 
 
@@ -64,10 +65,25 @@ def format_datetime(value: datetime | None, seconds: bool = False) -> str:
     return value.strftime("%Y-%m-%d %H:%M:%S" if seconds else "%Y-%m-%d %H:%M")
 
 
+def _rollback() -> None:
+    """Undo the failed request's changes; a broken database must not break the error page."""
+    try:
+        db.session.rollback()
+    except Exception:  # the original error is what gets reported
+        current_app.logger.warning("rollback failed while answering an error", exc_info=True)
+
+
 def _error_page(status: int, message: str, fields: object = None) -> ResponseReturnValue:
+    """Answer an error as JSON (API) or a page; this path must never raise itself."""
     if request.path.startswith("/api/"):
         body: dict[str, object] = {"code": status, "message": message}
         if fields:
             body["errors"] = fields
         return body, status
-    return render_template("error.html", status=status, message=message), status
+    try:
+        return render_template("error.html", status=status, message=message), status
+    except Exception:
+        # The page needs the session and the database; when they are the problem, answer plainly.
+        current_app.logger.exception("the error page for %s could not be drawn", status)
+        text = f"<!doctype html><title>{status}</title><h1>{status}</h1><p>{escape(message)}</p>"
+        return text, status, {"Content-Type": "text/html; charset=utf-8"}
