@@ -10,6 +10,7 @@ from cloudsim.audit.service import visible_events
 from cloudsim.auth.policy import role_required
 from cloudsim.extensions import db
 from cloudsim.models import Role
+from cloudsim.web.inputs import query_int
 
 bp = Blueprint("audit", __name__)
 PAGE_SIZE = 100
@@ -18,7 +19,7 @@ PAGE_SIZE = 100
 @bp.route("/audit")
 @role_required(Role.OFFICER)
 def index() -> ResponseReturnValue:
-    page = max(1, request.args.get("page", 1, type=int) or 1)
+    page = query_int("page", 1, minimum=1)
     action = request.args.get("action") or None
     events = db.paginate(
         visible_events(current_user, action=action),

@@ -6,7 +6,6 @@ from flask_wtf import FlaskForm
 from flask_wtf.file import FileField
 from wtforms import (
     DateTimeLocalField,
-    IntegerField,
     SelectChoice,
     SelectField,
     StringField,
@@ -22,6 +21,7 @@ from cloudsim.competition.schedule import (
 )
 from cloudsim.competition.worlds import worlds
 from cloudsim.models import Team
+from cloudsim.web.inputs import INT64_MAX, BoundedIntegerField
 
 ALL_TEAMS = "all"
 LOCAL_FORMAT = ["%Y-%m-%dT%H:%M", "%Y-%m-%dT%H:%M:%S"]
@@ -33,7 +33,7 @@ class ScheduleForm(FlaskForm):
     name = StringField("Name", validators=[DataRequired(), Length(max=120)])
     team = SelectField("Team")
     world = SelectField("World")
-    run_config = IntegerField("Run configuration", default=1, validators=[InputRequired()])
+    run_config = BoundedIntegerField("Run configuration", default=1, validators=[InputRequired()])
     time_zone = StringField("Time zone", default="UTC", validators=[DataRequired()])
     window_start = DateTimeLocalField(
         "Window opens", format=LOCAL_FORMAT, validators=[InputRequired()]
@@ -41,19 +41,25 @@ class ScheduleForm(FlaskForm):
     window_stop = DateTimeLocalField(
         "Window closes", format=LOCAL_FORMAT, validators=[InputRequired()]
     )
-    timeout_s = IntegerField(
+    timeout_s = BoundedIntegerField(
         "Timeout (s)", default=DEFAULT_TIMEOUT_S, validators=[InputRequired(), NumberRange(1)]
     )
-    latency_ms = IntegerField(
+    latency_ms = BoundedIntegerField(
         "Latency each way (ms)", default=DEFAULT_LATENCY_MS, validators=[InputRequired()]
     )
-    uplink_bits = IntegerField(
-        "Uplink cap (bits)", default=DEFAULT_UPLINK_BITS, validators=[InputRequired()]
+    uplink_bits = BoundedIntegerField(
+        "Uplink cap (bits)",
+        default=DEFAULT_UPLINK_BITS,
+        validators=[InputRequired()],
+        maximum=INT64_MAX,
     )
-    downlink_bits = IntegerField(
-        "Downlink cap (bits)", default=DEFAULT_DOWNLINK_BITS, validators=[InputRequired()]
+    downlink_bits = BoundedIntegerField(
+        "Downlink cap (bits)",
+        default=DEFAULT_DOWNLINK_BITS,
+        validators=[InputRequired()],
+        maximum=INT64_MAX,
     )
-    order = IntegerField("Order", default=0, validators=[Optional()])
+    order = BoundedIntegerField("Order", default=0, validators=[Optional()])
 
     def offer(self, teams: list[Team]) -> ScheduleForm:
         """Fill the choices."""

@@ -24,6 +24,9 @@ DEFAULT_TIMEOUT_S = 1800  # the VRC's 30 minutes
 DEFAULT_LATENCY_MS = 250  # each way, as in the VRC
 DEFAULT_UPLINK_BITS = 29_491_200  # the VRC's largest uplink cap
 DEFAULT_DOWNLINK_BITS = 943_718_400
+# Windows stay far from datetime's limits, so that every zone can show them.
+EARLIEST = datetime(2000, 1, 1, tzinfo=UTC)
+LATEST = datetime(9000, 1, 1, tzinfo=UTC)
 LOCAL_FORMATS = ("%Y-%m-%d %H:%M", "%Y-%m-%dT%H:%M", "%Y-%m-%d %H:%M:%S", "%Y-%m-%dT%H:%M:%S")
 
 
@@ -73,7 +76,14 @@ def to_utc(value: str | datetime, zone_name: str) -> datetime:
         value = parsed
     if value.tzinfo is None:
         value = value.replace(tzinfo=zone(zone_name))
-    return value.astimezone(UTC)
+    span = f"times must fall in the years {EARLIEST.year}-{LATEST.year - 1}"
+    try:
+        utc = value.astimezone(UTC)
+    except (OverflowError, ValueError):  # year 1 east of UTC, year 9999 west of it
+        raise InvalidInput(span) from None
+    if not EARLIEST <= utc < LATEST:
+        raise InvalidInput(span)
+    return utc
 
 
 def in_zone(value: datetime, zone_name: str) -> datetime:

@@ -67,6 +67,9 @@ def parse_season(text: str) -> tuple[list[tuple[TaskSpec, list[str] | None]], st
         document = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise InvalidInput(f"the schedule is not valid YAML: {exc}") from None
+    except (ValueError, OverflowError, RecursionError) as exc:
+        # PyYAML's constructors raise these for 2026-02-30, 5,000-digit numbers, deep nesting.
+        raise InvalidInput(f"the schedule holds a value YAML cannot read: {exc}") from None
     if not isinstance(document, dict) or not isinstance(document.get("tasks"), list):
         raise InvalidInput("the schedule must be a mapping with a 'tasks' list")
     unknown = set(document) - {"time_zone", "teams", "tasks"}

@@ -11,6 +11,7 @@ from cloudsim.auth.policy import role_required
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue, get_job, visible_jobs
 from cloudsim.models import Job, Role
+from cloudsim.web.inputs import query_int
 
 bp = Blueprint("jobs", __name__)
 PAGE_SIZE = 50
@@ -41,7 +42,7 @@ def job_summary(job: Job, *, with_log: bool = False) -> dict[str, object]:
 @bp.route("/jobs")
 @role_required(Role.OFFICER)
 def index() -> ResponseReturnValue:
-    page = max(1, request.args.get("page", 1, type=int) or 1)
+    page = query_int("page", 1, minimum=1)
     state = request.args.get("state") or None
     query = visible_jobs(current_user, state=state)
     jobs = db.paginate(query, page=page, per_page=PAGE_SIZE, error_out=False)
@@ -69,7 +70,7 @@ def show(job_id: str) -> ResponseReturnValue:
 def progress(job_id: str) -> ResponseReturnValue:
     """Return the job's state and the part of its log after `since` characters."""
     job = get_job(current_user, job_id)
-    since = max(0, request.args.get("since", 0, type=int) or 0)
+    since = query_int("since", 0)
     data = job_summary(job)
     data["log"] = (job.log or "")[since:]
     data["log_length"] = len(job.log or "")

@@ -8,7 +8,6 @@ from flask import (
     jsonify,
     redirect,
     render_template,
-    request,
     url_for,
 )
 from flask.typing import ResponseReturnValue
@@ -24,6 +23,7 @@ from cloudsim.launched_constellations.forms import LaunchForm
 from cloudsim.models import Role
 from cloudsim.people.service import visible_teams
 from cloudsim.web.downloads import attachment
+from cloudsim.web.inputs import query_id
 
 bp = Blueprint("constellations", __name__)
 
@@ -130,6 +130,6 @@ def ssh_bundle(ref: int) -> ResponseReturnValue:
 def vpn_bundle(ref: int) -> ResponseReturnValue:
     """Download a team user's VPN bundle: one's own, or (officers) ?user_id=N's."""
     constellation = service.get_constellation(current_user, ref)
-    user_id = request.args.get("user_id", type=int)
+    user_id = query_id("user_id")
     filename, data = vpn.vpn_bundle(current_user, constellation, user_id)
     return attachment(data, filename, private=True)

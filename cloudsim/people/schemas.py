@@ -24,7 +24,7 @@ class UserSchema(Schema):
     team_id = Id(allow_none=True, load_default=None)
     active = fields.Bool(dump_only=True)
     created_at = fields.DateTime(dump_only=True)
-    last_login_at = fields.DateTime(dump_only=True)
+    last_login_at = fields.DateTime(dump_only=True, allow_none=True)
 
 
 class UserCreateSchema(UserSchema):

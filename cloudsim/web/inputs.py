@@ -169,6 +169,16 @@ def query_int(name: str, default: int, minimum: int = 0, maximum: int = INT32_MA
         return default
 
 
+def query_id(name: str) -> int | None:
+    """Return a page's query parameter naming a row, None when absent; 400 when not an id."""
+    raw = request.args.get(name)
+    if raw is None:
+        return None
+    if not raw.isascii() or not raw.isdigit() or len(raw) > 10 or int(raw) > INT32_MAX:
+        raise BadRequest(f"{name} must be a positive whole number below {INT32_MAX + 1}")
+    return int(raw)
+
+
 def init_inputs(app: Flask) -> None:
     """Bound every route's ids and parse every body through this module (before any route)."""
     app.url_map.converters["int"] = IdConverter
