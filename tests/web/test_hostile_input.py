@@ -82,7 +82,8 @@ def _api(app: Flask, user: User, method: str, path: str, body: str | None = None
             "/api/v1/schedule",
             json.dumps(
                 {
-                    "yaml": "tasks: [{name: d, world: vrc_task_1, start: 2030-02-30, stop: 2031-01-01}]"
+                    "yaml": "tasks: [{name: d, world: vrc_task_1, "
+                    "start: 2030-02-30, stop: 2031-01-01}]"
                 }
             ),
             400,
