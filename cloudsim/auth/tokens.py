@@ -64,6 +64,14 @@ def revoke_token(user: User, token_id: int) -> None:
         db.session.commit()
 
 
+def revoke_all_tokens(user: User) -> None:
+    """Revoke every live token of the user (the caller commits)."""
+    now = utcnow()
+    for token in user.tokens:
+        if token.revoked_at is None:
+            token.revoked_at = now
+
+
 def user_for_token(plaintext: str) -> User | None:
     """Return the active user a live token belongs to, noting its use."""
     if not plaintext.startswith(TOKEN_PREFIX):

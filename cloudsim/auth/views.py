@@ -6,12 +6,13 @@ from urllib.parse import urlsplit
 
 from flask import Blueprint, current_app, flash, redirect, render_template, request, url_for
 from flask.typing import ResponseReturnValue
-from flask_login import current_user, login_required, login_user, logout_user
+from flask_login import current_user, login_required
 from sqlalchemy import select
 
 from cloudsim.audit.service import record
 from cloudsim.auth.forms import ConfirmForm, LoginForm, PasswordForm, TokenForm
 from cloudsim.auth.passwords import verify_password
+from cloudsim.auth.session import end_session, start_session
 from cloudsim.auth.tokens import issue_token, revoke_token
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db, limiter
@@ -56,7 +57,7 @@ def login() -> ResponseReturnValue:
         # Verify even for an unknown e-mail, so that timing does not reveal which accounts exist.
         password_ok = verify_password(user.password_hash if user else None, form.password.data)
         if user is not None and user.active and password_ok:
-            login_user(user)
+            start_session(user)
             user.last_login_at = utcnow()
             record("auth.login", user, target_type="user", target_id=user.id, team_id=user.team_id)
             db.session.commit()
@@ -80,8 +81,8 @@ def logout() -> ResponseReturnValue:
             target_id=current_user.id,
             team_id=current_user.team_id,
         )
+        end_session()
         db.session.commit()
-        logout_user()
         flash("You are logged out.", "info")
     return redirect(url_for("auth.login"))
 
@@ -117,8 +118,8 @@ def change_password() -> ResponseReturnValue:
                     target_id=user.id,
                     team_id=user.team_id,
                 )
+                start_session(user)
                 db.session.commit()
-                login_user(user)
                 flash("Password changed; other sessions were logged out.", "info")
                 return redirect(url_for("auth.account"))
             except CloudSimError as exc:

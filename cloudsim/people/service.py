@@ -12,6 +12,8 @@ from sqlalchemy.orm import selectinload
 from cloudsim.audit.service import record
 from cloudsim.auth.passwords import generate_password, hash_password
 from cloudsim.auth.policy import require_role, require_team_access
+from cloudsim.auth.session import end_sessions
+from cloudsim.auth.tokens import revoke_all_tokens
 from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.vpn import revoke_and_push
@@ -262,11 +264,13 @@ def update_user(
         if not active and user.role == Role.ADMIN:
             _ensure_another_admin(user)
         user.active = active
-        user.session_version += 1
+        if not active:  # a disabled account keeps no way in, even once enabled again
+            end_sessions(user)
+            revoke_all_tokens(user)
         changes["active"] = active
     if password:
         user.password_hash = hash_password(password)
-        user.session_version += 1
+        end_sessions(user)  # API tokens stay: they are revoked one by one, or by disabling
         changes["password"] = "changed"  # noqa: S105
     record(
         "user.update", actor, target_type="user", target_id=user.id, team_id=user.team_id, **changes
