@@ -26,6 +26,11 @@ class NotFound(CloudSimError):
 
     status = 404
 
+    @classmethod
+    def of(cls, kind: str, ref: object) -> NotFound:
+        """Return the one answer for a thing that is missing or not the actor's to know about."""
+        return cls(f"{kind} {ref} not found")
+
 
 class Conflict(CloudSimError):
     """The request clashes with the current state (a duplicate name, a busy constellation)."""

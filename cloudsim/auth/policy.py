@@ -22,12 +22,13 @@ def require_role(actor: User | None, role: Role, action: str) -> None:
         raise Forbidden(f"only {role.value}s and above may {action}")
 
 
-def require_team_access(actor: User | None, team_id: int | None) -> None:
-    """Raise NotFound (not Forbidden: a user must not learn what exists) for another team's data."""
+def require_team_access(actor: User | None, team_id: int | None, kind: str, ref: object) -> None:
+    """Raise NotFound for another team's `kind` `ref`, worded exactly as for a missing one:
+    a user must not learn what exists."""
     if actor is None or actor.has_role(Role.OFFICER):
         return
     if team_id is None or actor.team_id != team_id:
-        raise NotFound("not found")
+        raise NotFound.of(kind, ref)
 
 
 def role_required(role: Role) -> Callable[[F], F]:

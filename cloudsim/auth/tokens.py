@@ -57,7 +57,7 @@ def revoke_token(user: User, token_id: int) -> None:
     """Revoke one of the user's own tokens."""
     token = db.session.get(ApiToken, token_id)
     if token is None or token.user_id != user.id:
-        raise NotFound(f"token {token_id} not found")
+        raise NotFound.of("token", token_id)
     if token.revoked_at is None:
         token.revoked_at = utcnow()
         record("token.revoke", user, target_type="token", target_id=token.id, team_id=user.team_id)

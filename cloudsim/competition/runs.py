@@ -40,7 +40,7 @@ def start_run(actor: User | None, task_id: int, constellation_id: int | None = N
     if task is None or (is_team_user and actor is not None and actor.team_id != task.team_id):
         if is_team_user:
             raise Forbidden(NOT_OPEN)
-        raise NotFound(f"task {task_id} not found")
+        raise NotFound.of("task", task_id)
     now = utcnow()
     if now < task.window_start:
         raise Forbidden(NOT_OPEN if is_team_user else f"the window of {task.name} is not open")
@@ -148,8 +148,8 @@ def get_run(actor: User | None, run_id: int) -> Run:
     """Return a run the actor may see."""
     run = db.session.get(Run, run_id)
     if run is None:
-        raise NotFound(f"run {run_id} not found")
-    require_team_access(actor, run.team_id)
+        raise NotFound.of("run", run_id)
+    require_team_access(actor, run.team_id, "run", run_id)
     return run
 
 
@@ -158,7 +158,7 @@ def get_log(actor: User | None, run_id: int, artifact_id: int) -> Artifact:
     run = get_run(actor, run_id)
     artifact = db.session.get(Artifact, artifact_id)
     if artifact is None or artifact.run_id != run.id:
-        raise NotFound(f"log {artifact_id} of run {run_id} not found")
+        raise NotFound.of(f"log {artifact_id} of run", run_id)
     return artifact
 
 

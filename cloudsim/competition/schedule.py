@@ -126,7 +126,7 @@ def _teams(team_ids: list[int] | None) -> list[Team]:
     for team_id in dict.fromkeys(team_ids):
         team = db.session.get(Team, team_id)
         if team is None:
-            raise NotFound(f"team {team_id} not found")
+            raise NotFound.of("team", team_id)
         teams.append(team)
     return teams
 
@@ -174,10 +174,10 @@ def get_task(actor: User | None, task_id: int) -> Task:
     """Return a task the actor may see: a team user sees their team's, once its window opened."""
     task = db.session.get(Task, task_id)
     if task is None:
-        raise NotFound(f"task {task_id} not found")
-    require_team_access(actor, task.team_id)
+        raise NotFound.of("task", task_id)
+    require_team_access(actor, task.team_id, "task", task_id)
     if not _sees_everything(actor) and task.window_start > utcnow():
-        raise NotFound(f"task {task_id} not found")
+        raise NotFound.of("task", task_id)
     return task
 
 

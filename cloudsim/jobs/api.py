@@ -6,9 +6,9 @@ from typing import Any
 
 from flask.views import MethodView
 
-from cloudsim.api.common import Blueprint, SelectPage, caller_with
+from cloudsim.api.common import Blueprint, SelectPage, caller, caller_with
 from cloudsim.jobs.schemas import JobDetailSchema, JobQuerySchema, JobSchema
-from cloudsim.jobs.service import enqueue, get_job, visible_jobs
+from cloudsim.jobs.service import get_job, start_maintenance, visible_jobs
 from cloudsim.models import Role
 
 blp = Blueprint("api_jobs", __name__, description="Background jobs and their progress")
@@ -27,7 +27,7 @@ class Jobs(MethodView):
     @blp.response(202, JobSchema)
     def post(self, data: dict[str, Any]) -> Any:
         """Start a maintenance job such as `diagnostics` (admins)."""
-        return enqueue(data["kind"], caller_with(Role.ADMIN, "start maintenance jobs"))
+        return start_maintenance(data["kind"], caller())
 
 
 @blp.route("/jobs/<job_id>")

@@ -15,7 +15,7 @@ from cloudsim.jobs.runner import JobContext, job_kind
 MIN_FREE_BYTES = 1 << 30
 
 
-@job_kind("diagnostics")
+@job_kind("diagnostics", maintenance=True)
 def run_diagnostics(ctx: JobContext) -> None:
     """Check the database, the queue, the keyring and the instance folder's free space."""
     settings = current_app.config["CLOUDSIM"]

@@ -20,6 +20,9 @@ log = logging.getLogger(__name__)
 
 JobFunction = Callable[["JobContext"], None]
 JOB_KINDS: dict[str, JobFunction] = {}
+# Kinds an admin may start by name (the API's POST /jobs); every other kind is started by the
+# service that owns its rules (launching, runs, ...), never directly.
+MAINTENANCE_KINDS: set[str] = set()
 MASK = "***"
 
 
@@ -27,11 +30,13 @@ class JobGone(Exception):
     """The job's row no longer exists."""
 
 
-def job_kind(name: str) -> Callable[[JobFunction], JobFunction]:
+def job_kind(name: str, *, maintenance: bool = False) -> Callable[[JobFunction], JobFunction]:
     """Register a function as the body of jobs of this kind; it must be idempotent."""
 
     def register(fn: JobFunction) -> JobFunction:
         JOB_KINDS[name] = fn
+        if maintenance:
+            MAINTENANCE_KINDS.add(name)
         return fn
 
     return register

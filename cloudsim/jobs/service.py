@@ -13,10 +13,10 @@ from kombu.exceptions import OperationalError
 from sqlalchemy import Select, or_, select
 
 from cloudsim.audit.service import record
-from cloudsim.auth.policy import require_team_access
+from cloudsim.auth.policy import require_role, require_team_access
 from cloudsim.errors import InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.jobs.runner import JOB_KINDS, run_job
+from cloudsim.jobs.runner import JOB_KINDS, MAINTENANCE_KINDS, run_job
 from cloudsim.models import Job, JobState, Role, User, utcnow
 
 log = logging.getLogger(__name__)
@@ -52,6 +52,15 @@ def enqueue(
     return job
 
 
+def start_maintenance(kind: str, actor: User | None) -> Job:
+    """Start a maintenance job such as diagnostics (admins); other kinds belong to services."""
+    require_role(actor, Role.ADMIN, "start maintenance jobs")
+    if kind not in MAINTENANCE_KINDS:
+        known = ", ".join(sorted(MAINTENANCE_KINDS))
+        raise InvalidInput(f"unknown maintenance job kind {kind!r}; known: {known}")
+    return enqueue(kind, actor)
+
+
 def send(job: Job) -> bool:
     """Put the job's message on the queue; return False (and log) when the broker is down."""
     try:
@@ -66,9 +75,8 @@ def get_job(actor: User | None, job_id: str) -> Job:
     """Return a job the actor may see."""
     job = db.session.get(Job, job_id)
     if job is None:
-        raise NotFound(f"job {job_id} not found")
-    if actor is not None and not actor.has_role(Role.OFFICER):
-        require_team_access(actor, job.team_id)
+        raise NotFound.of("job", job_id)
+    require_team_access(actor, job.team_id, "job", job_id)
     return job
 
 

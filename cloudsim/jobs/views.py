@@ -9,7 +9,7 @@ from flask_login import current_user
 from cloudsim.auth.forms import ConfirmForm
 from cloudsim.auth.policy import role_required
 from cloudsim.extensions import db
-from cloudsim.jobs.service import enqueue, get_job, visible_jobs
+from cloudsim.jobs.service import get_job, start_maintenance, visible_jobs
 from cloudsim.models import Job, Role
 from cloudsim.web.inputs import query_int
 
@@ -54,7 +54,7 @@ def index() -> ResponseReturnValue:
 def start_diagnostics() -> ResponseReturnValue:
     if not ConfirmForm().validate_on_submit():
         return redirect(url_for("jobs.index")), 400
-    job = enqueue("diagnostics", current_user)
+    job = start_maintenance("diagnostics", current_user)
     flash("Diagnostics started.", "info")
     return redirect(url_for("jobs.show", job_id=job.id))
 

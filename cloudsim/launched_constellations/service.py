@@ -46,8 +46,8 @@ def get_constellation(actor: User | None, ref: int | str) -> Constellation:
     else:
         constellation = db.session.scalar(select(Constellation).where(Constellation.name == ref))
     if constellation is None:
-        raise NotFound(f"constellation {ref} not found")
-    require_team_access(actor, constellation.team_id)
+        raise NotFound.of("constellation", ref)
+    require_team_access(actor, constellation.team_id, "constellation", ref)
     return constellation
 
 
@@ -79,7 +79,7 @@ def launch(
     if provider not in PROVIDERS:
         raise InvalidInput(f"unknown provider {provider!r}; known: {', '.join(PROVIDERS)}")
     if team_id is not None and db.session.get(Team, team_id) is None:
-        raise NotFound(f"team {team_id} not found")
+        raise NotFound.of("team", team_id)
     if db.session.scalar(select(Constellation.id).where(Constellation.name == name)):
         raise Conflict(f"a constellation named {name!r} already exists")
     constellation = Constellation(

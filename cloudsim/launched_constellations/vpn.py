@@ -11,7 +11,7 @@ from sqlalchemy import select
 
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import require_team_access
-from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
+from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.keys import constellation_secret
 from cloudsim.models import Constellation, ConstellationState, Role, Secret, SecretKind, User
@@ -134,12 +134,13 @@ def vpn_bundle(
     A bundle never holds SSH keys or the router's keys: only the CA certificate and the user's
     own certificate and key.
     """
-    require_team_access(actor, constellation.team_id)
+    require_team_access(actor, constellation.team_id, "constellation", constellation.id)
+    if user_id is not None and user_id != actor.id and not actor.has_role(Role.OFFICER):
+        # The same answer whether or not the user exists: ids must not be probed through this.
+        raise NotFound.of("user", user_id)
     user = actor if user_id is None else db.session.get(User, user_id)
     if user is None:
-        raise NotFound(f"user {user_id} not found")
-    if user.id != actor.id and not actor.has_role(Role.OFFICER):
-        raise Forbidden("you may only download your own VPN bundle")
+        raise NotFound.of("user", user_id)
     if user.role != Role.USER or user.team_id != constellation.team_id or not user.active:
         raise InvalidInput(f"{user.email} is not an active member of this constellation's team")
     if constellation.kind != "vrc":

@@ -50,10 +50,10 @@ def parse_role(value: str | Role) -> Role:
 
 def get_team(actor: User | None, team_id: int) -> Team:
     """Return the team if it exists and the actor may see it."""
-    require_team_access(actor, team_id)
+    require_team_access(actor, team_id, "team", team_id)
     team = db.session.get(Team, team_id)
     if team is None:
-        raise NotFound(f"team {team_id} not found")
+        raise NotFound.of("team", team_id)
     return team
 
 
@@ -152,11 +152,11 @@ class NewUser:
 
 def get_user(actor: User | None, user_id: int) -> User:
     """Return the user if it exists and the actor may see it (officers; or oneself)."""
-    user = db.session.get(User, user_id)
     if actor is not None and not actor.has_role(Role.OFFICER) and actor.id != user_id:
-        raise NotFound(f"user {user_id} not found")
+        raise NotFound.of("user", user_id)
+    user = db.session.get(User, user_id)
     if user is None:
-        raise NotFound(f"user {user_id} not found")
+        raise NotFound.of("user", user_id)
     return user
 
 
@@ -182,7 +182,7 @@ def _team_for_role(role: Role, team_id: int | None) -> int | None:
         if team_id is None:
             raise InvalidInput("a user of role 'user' must belong to a team")
         if db.session.get(Team, team_id) is None:
-            raise NotFound(f"team {team_id} not found")
+            raise NotFound.of("team", team_id)
         return team_id
     if team_id is not None:
         raise InvalidInput(f"{role.value}s do not belong to a team; leave the team empty")
