@@ -61,10 +61,22 @@ TASK_KEYS = {
 }
 
 
+class SeasonLoader(yaml.SafeLoader):
+    """YAML's safe loader that keeps times as the text they are (the task's zone gives their
+    meaning); YAML's own timestamps lose the zone, turn a date-only value into a date, and
+    raise on 2026-02-30."""
+
+
+SeasonLoader.yaml_implicit_resolvers = {
+    first: [(tag, rx) for tag, rx in resolvers if tag != "tag:yaml.org,2002:timestamp"]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+
+
 def parse_season(text: str) -> tuple[list[tuple[TaskSpec, list[str] | None]], str]:
     """Read a season document into (spec, team names or None for all) pairs and its zone."""
     try:
-        document = yaml.safe_load(text)
+        document = yaml.load(text, Loader=SeasonLoader)  # noqa: S506 (a SafeLoader)
     except yaml.YAMLError as exc:
         raise InvalidInput(f"the schedule is not valid YAML: {exc}") from None
     except (ValueError, OverflowError, RecursionError) as exc:
@@ -106,8 +118,8 @@ def _entry(
             name=str(item["name"]),
             world=str(item["world"]),
             run_config=_whole(item.get("config", 1), "config"),
-            window_start=to_utc(_text(item["start"]), task_zone),
-            window_stop=to_utc(_text(item["stop"]), task_zone),
+            window_start=to_utc(str(item["start"]), task_zone),
+            window_stop=to_utc(str(item["stop"]), task_zone),
             timeout_s=_whole(item.get("timeout_s", DEFAULT_TIMEOUT_S), "timeout_s"),
             latency_ms=_whole(item.get("latency_ms", DEFAULT_LATENCY_MS), "latency_ms"),
             uplink_bits=_whole(item.get("uplink_bits", DEFAULT_UPLINK_BITS), "uplink_bits"),
@@ -119,11 +131,6 @@ def _entry(
         raise InvalidInput(f"{item.get('name', '?')}: {exc}") from None
     teams = _team_names(item["teams"], "teams") if "teams" in item else default_teams
     return check_spec(spec), teams
-
-
-def _text(value: Any) -> str:
-    # YAML reads an unquoted 2026-06-17 09:00:00 as a naive datetime; keep it wall-clock text
-    return value.isoformat(sep=" ") if hasattr(value, "isoformat") else str(value)
 
 
 def _whole(value: Any, name: str) -> int:

@@ -122,6 +122,22 @@ def test_api_refuses_hostile_input(
     assert not log.records, log.report()
 
 
+def test_a_date_only_yaml_time_means_midnight_in_the_zone(
+    app: Flask, people: dict[str, User | None]
+) -> None:
+    text = (
+        "time_zone: Asia/Tokyo\ntasks: [{name: Dates, world: vrc_task_1, "
+        "start: 2030-01-01, stop: 2030-01-02}]"
+    )
+    with watched_log() as log:
+        response = _api(
+            app, people["admin"], "POST", "/api/v1/schedule", json.dumps({"yaml": text})
+        )  # type: ignore[arg-type]
+    assert response.status_code == 201, response.get_data(as_text=True)  # type: ignore[attr-defined]
+    assert response.json[0]["window_start"].startswith("2029-12-31T15:00")  # type: ignore[attr-defined]
+    assert not log.records, log.report()
+
+
 def test_pages_far_past_the_end_are_empty(app: Flask, people: dict[str, User | None]) -> None:
     client = app.test_client()
     log_in(client, people["officer"])  # type: ignore[arg-type]
