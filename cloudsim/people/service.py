@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from email_validator import EmailNotValidError, validate_email
 from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import selectinload
 
 from cloudsim.audit.service import record
@@ -16,8 +17,8 @@ from cloudsim.auth.session import end_sessions
 from cloudsim.auth.tokens import revoke_all_tokens
 from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.launched_constellations.vpn import revoke_and_push
 from cloudsim.models import ConstellationState, Role, Team, User
+from cloudsim.people.access import revoke_team_access
 
 TEAM_NAME_MAX = 80
 
@@ -92,6 +93,15 @@ def _ensure_team_name_free(name: str, except_id: int | None = None) -> None:
         raise Conflict(f"a team named {name!r} already exists")
 
 
+def _flush_team_name(name: str) -> None:
+    """Flush a team's new name; the database's unique index has the last word on duplicates
+    (its case folding is not Python's for non-ASCII names)."""
+    try:
+        db.session.flush()
+    except IntegrityError:  # the caller's rollback (every boundary has one) clears the session
+        raise Conflict(f"a team named {name!r} already exists") from None
+
+
 def create_team(actor: User | None, name: str) -> Team:
     """Create a team (officers and admins)."""
     require_role(actor, Role.OFFICER, "create teams")
@@ -99,7 +109,7 @@ def create_team(actor: User | None, name: str) -> Team:
     _ensure_team_name_free(name)
     team = Team(name=name)
     db.session.add(team)
-    db.session.flush()
+    _flush_team_name(name)
     record("team.create", actor, target_type="team", target_id=team.id, team_id=team.id, name=name)
     db.session.commit()
     return team
@@ -112,6 +122,7 @@ def rename_team(actor: User | None, team_id: int, name: str) -> Team:
     name = _clean_team_name(name)
     _ensure_team_name_free(name, except_id=team.id)
     old, team.name = team.name, name
+    _flush_team_name(name)
     record(
         "team.rename",
         actor,
@@ -255,7 +266,8 @@ def update_user(
             wanted_team = None  # promoting a team user to officer takes them out of the team
         user.team_id = _team_for_role(new_role, wanted_team)
         user.role = new_role
-        changes.update(role=new_role.value, team_id=user.team_id)
+        # Not team_id=: that is record()'s own argument (the team the event belongs to).
+        changes.update(role=new_role.value, team=user.team_id, old_team=old_team)
     leaving_team = user.team_id != old_team or (active is False and user.active)
     if name is not None:
         user.name = name.strip()[:120]
@@ -277,7 +289,7 @@ def update_user(
     )
     db.session.commit()
     if leaving_team:
-        revoke_and_push(user)  # they leave the team's VPN at once
+        revoke_team_access(user)
     return user
 
 
@@ -289,7 +301,7 @@ def delete_user(actor: User | None, user_id: int) -> None:
         raise Forbidden("you cannot delete your own account")
     if user.role == Role.ADMIN:
         _ensure_another_admin(user)
-    revoke_and_push(user)
+    revoke_team_access(user)
     record(
         "user.delete",
         actor,

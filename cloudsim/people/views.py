@@ -33,6 +33,7 @@ def create_team() -> ResponseReturnValue:
         try:
             team = service.create_team(current_user, form.name.data)
         except CloudSimError as exc:
+            db.session.rollback()
             form.name.errors = [str(exc)]
             status = exc.status
         else:

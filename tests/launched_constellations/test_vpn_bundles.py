@@ -9,7 +9,7 @@ import pytest
 from flask import Flask
 from sqlalchemy import select
 
-from cloudsim.errors import Forbidden, NotFound
+from cloudsim.errors import NotFound
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import vpn
 from cloudsim.models import (
@@ -72,7 +72,7 @@ def test_who_may_download_which_bundle(
     app: Flask, people: dict[str, User | None], ready_vrc: Constellation
 ) -> None:
     teammate = make_user(Role.USER, people["user_a"].team)  # type: ignore[union-attr]
-    with pytest.raises(Forbidden):
+    with pytest.raises(NotFound):  # as for an id that does not exist: ids are not probed
         vpn.vpn_bundle(people["user_a"], ready_vrc, teammate.id)  # type: ignore[arg-type]
     with pytest.raises(NotFound):
         vpn.vpn_bundle(people["user_b"], ready_vrc)  # type: ignore[arg-type]

@@ -205,3 +205,15 @@ def test_an_oversized_body_from_a_logged_in_user_gets_the_error_page(
     assert "Log out" in response.get_data(as_text=True)  # the full page, as the user
     assert api.status_code == 413
     assert not log.records, log.report()
+
+
+def test_a_duplicate_non_ascii_team_name_is_a_conflict(
+    app: Flask, people: dict[str, User | None]
+) -> None:
+    """SQLite's lower() folds ASCII only: the database's unique index decides, as a 409."""
+    with watched_log() as log:
+        first = _api(app, people["officer"], "POST", "/api/v1/teams", '{"name": "Équipe"}')  # type: ignore[arg-type]
+        again = _api(app, people["officer"], "POST", "/api/v1/teams", '{"name": "Équipe"}')  # type: ignore[arg-type]
+    assert first.status_code == 201  # type: ignore[attr-defined]
+    assert again.status_code == 409 and "already exists" in again.json["message"]  # type: ignore[attr-defined]
+    assert not log.records, log.report()
