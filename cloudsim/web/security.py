@@ -7,7 +7,8 @@ from flask_talisman import Talisman
 
 from cloudsim.config import Config
 
-# Scripts and styles come from /static only: the pages carry no inline script or style.
+# Scripts and styles come from /static only: the pages carry no inline script or style but the
+# 3D viewer's import map, which carries the request's nonce.
 CONTENT_SECURITY_POLICY = {
     "default-src": "'self'",
     "script-src": "'self'",
@@ -28,6 +29,7 @@ def init_security(app: Flask, config: Config) -> None:
         strict_transport_security=config.secure_cookies,
         session_cookie_secure=config.secure_cookies,
         content_security_policy=CONTENT_SECURITY_POLICY,
+        content_security_policy_nonce_in=["script-src"],
         frame_options="DENY",
         referrer_policy="same-origin",
         x_content_type_options=True,
