@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import struct
+import time
 from pathlib import Path
 
 import pytest
 from drcsim.engine import RunOptions, Simulation
 from drcsim.runlog import read_states
 from flask import current_app
+from playwright.sync_api import Page
 
 from cloudsim.competition.artifacts import LogStore
 from cloudsim.competition.jobs import score_run
@@ -54,3 +56,13 @@ def logged_pelvis(folder: Path, step: int) -> tuple[float, float, float]:
             x, y, z = struct.unpack_from("<3f", record["state32"])
             return x, y, z
     raise AssertionError(f"no state record for step {step}")
+
+
+def wait_for(page: Page, expression: str, timeout: float = 30_000) -> None:
+    """Await a condition by polling page.evaluate: the pages' CSP forbids the eval that
+    Playwright's wait_for_function runs inside the page."""
+    deadline = time.monotonic() + timeout / 1000
+    while not page.evaluate(expression):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {expression}")
+        page.wait_for_timeout(50)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from urllib.parse import urlsplit
@@ -17,7 +16,7 @@ from playwright.sync_api import Browser, expect
 from cloudsim.extensions import db
 from cloudsim.models import Run, User
 from tests.competition.support import store_log
-from tests.viewer.conftest import logged_pelvis, store_run
+from tests.viewer.conftest import logged_pelvis, store_run, wait_for
 from tests.web.test_browser import live_url, log_in_page, webgl_chromium  # noqa: F401
 
 pytestmark = pytest.mark.browser
@@ -41,16 +40,6 @@ def _add_bandwidth_log(run: Run, tmp_path: Path) -> None:
     db.session.commit()
 
 
-def _wait_for(page: Page, expression: str, timeout: float = 30_000) -> None:
-    """Await a condition by polling page.evaluate: the pages' CSP forbids the eval that
-    Playwright's wait_for_function runs inside the page."""
-    deadline = time.monotonic() + timeout / 1000
-    while not page.evaluate(expression):
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {expression}")
-        page.wait_for_timeout(50)
-
-
 def test_a_team_replays_its_run_where_the_state_log_says(
     app: Flask,
     live_url: str,  # noqa: F811
@@ -72,7 +61,7 @@ def test_a_team_replays_its_run_where_the_state_log_says(
     run_page.goto(f"{live_url}/runs/{run.id}")
     page.goto(f"{live_url}/runs/{run.id}")
     page.get_by_role("link", name="Replay in 3D").click()
-    _wait_for(page, "window.cloudsimViewer && window.cloudsimViewer.ready", timeout=60_000)
+    wait_for(page, "window.cloudsimViewer && window.cloudsimViewer.ready", timeout=60_000)
     assert page.evaluate("cloudsimViewer.error") is None
 
     # the scene holds the robot and every object of the world
@@ -94,7 +83,7 @@ def test_a_team_replays_its_run_where_the_state_log_says(
     mark = page.locator(".viewer-mark.checkpoint").first
     when = float(mark.get_attribute("data-t") or "nan")
     mark.click()
-    _wait_for(page, f"Math.abs(cloudsimViewer.t - {when}) < 0.04")
+    wait_for(page, f"Math.abs(cloudsimViewer.t - {when}) < 0.04")
     markers = page.locator("#viewer-bandwidth line.replay-mark")
     second = str(int(page.evaluate("cloudsimViewer.t")))
     expect(markers.first).to_have_attribute("data-second", second)
@@ -107,7 +96,7 @@ def test_a_team_replays_its_run_where_the_state_log_says(
     page.evaluate("cloudsimViewer.seek(0)")
     page.get_by_label("Speed").select_option("8")
     page.get_by_role("button", name="Play").click()
-    _wait_for(page, "cloudsimViewer.t > 3", timeout=5_000)
+    wait_for(page, "cloudsimViewer.t > 3", timeout=5_000)
     page.get_by_role("button", name="Pause").click()
 
     page.evaluate("cloudsimViewer.seek(5.5)")

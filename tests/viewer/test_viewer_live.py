@@ -28,7 +28,7 @@ from tests.provisioners.ssh.conftest import (  # noqa: F401
     sshd_factory,
 )
 from tests.provisioners.ssh.sshd_server import SshServer
-from tests.viewer.conftest import store_run
+from tests.viewer.conftest import store_run, wait_for
 from tests.web.test_browser import live_url, log_in_page, webgl_chromium  # noqa: F401
 
 pytestmark = pytest.mark.browser
@@ -86,12 +86,12 @@ def test_an_officer_watches_a_running_simulator_live(
     page = webgl_browser.new_context().new_page()
     log_in_page(page, live_url, officer)
     page.goto(f"{live_url}/runs/{run.id}/view")
-    page.wait_for_function("window.cloudsimViewer && cloudsimViewer.ready", timeout=60_000)
+    wait_for(page, "window.cloudsimViewer && cloudsimViewer.ready", timeout=60_000)
     expect(page.locator("#viewer-status")).to_contain_text("waiting for the simulator")
     follower.start()  # as the job would: started by a viewer's poll
-    page.wait_for_function("cloudsimViewer.step !== null", timeout=60_000)
+    wait_for(page, "cloudsimViewer.step !== null", timeout=60_000)
     first = page.evaluate("cloudsimViewer.t")
-    page.wait_for_function(f"cloudsimViewer.t > {first} + 4", timeout=30_000)  # 2nd chunk too
+    wait_for(page, f"cloudsimViewer.t > {first} + 4", timeout=30_000)  # 2nd chunk too
     robot = page.evaluate("cloudsimViewer.robotId()")
     x, y, z = page.evaluate(f"cloudsimViewer.linkPosition({robot}, 0)")
     assert abs(x) < 0.5 and abs(y) < 0.5 and 0.6 < z < 1.2  # standing at the start
