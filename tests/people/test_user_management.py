@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import pytest
-from cloudsim.fleet import vpn
 from flask import Flask
 from sqlalchemy import select
 
 from cloudsim.errors import Conflict
 from cloudsim.extensions import db
+from cloudsim.launched_constellations import vpn
 from cloudsim.models import AuditEvent, Constellation, ConstellationState, Job, Machine, Role, User
 from cloudsim.people.service import delete_user, update_user
 from provisioners import pki
