@@ -11,9 +11,13 @@ from drcsim.assists import Coupling, Grasps, Harness, Seat, Valve
 from drcsim.control import JointController
 from drcsim.driving import VehicleDrive
 from drcsim.errors import CommandError
+from drcsim.gait import GaitParameters
 from drcsim.models import humanoid
+from drcsim.reach import ARM_JOINTS, REACH_EVERY, Reach
 from drcsim.scene import Scene
+from drcsim.walker import Walker
 
+GAIT_KEYS = ("step_length", "step_height", "step_time", "double_support", "stance_width")
 WALK_SPEED = 0.8  # m/s on paved ground
 TURN_RATE = 0.8  # rad/s
 STRIDE = 0.6  # metres per gait cycle
@@ -22,91 +26,12 @@ YAW_TOLERANCE = 0.04
 MAX_LEAD = 0.15  # how far the harness may lead the pelvis before walking waits
 SETTLE_STEPS = 3000  # physics steps the walk may spend closing the last centimetres
 PUSH_LIMIT = 150.0  # N of contact force against a movable object that stops a walk
-REACH_EVERY = 20  # physics steps between task-space IK updates (50 Hz)
-REACH_GAIN = 0.3
-REACH_TOLERANCE = 0.02
 LEG_JOINTS = [s.name for s in humanoid.BODY_JOINTS if "_leg_" in s.name]
 TRUNK_JOINTS = ["back_bkz", "back_bky", "back_bkx", "neck_ry"]
-ARM_JOINTS = {
-    side: [s.name for s in humanoid.BODY_JOINTS if s.name.startswith(f"{side[0]}_arm")]
-    for side in ("left", "right")
-}
 
 
 def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2 * math.pi) - math.pi
-
-
-class Reach:
-    """Moves one hand (or the object it holds) to a world point by task-space integral IK."""
-
-    def __init__(
-        self,
-        scene: Scene,
-        controller: JointController,
-        side: str,
-        target: list[float],
-        tool: bool,
-        grasps: Grasps,
-        frame: str = "world",
-    ) -> None:
-        self.scene, self.controller, self.side = scene, controller, side
-        self.target = np.array(target, dtype=float)
-        self.frame = frame
-        self.link = scene.robot_links[humanoid.HAND_LINKS[side]]
-        self.slots = [controller.slot[name] for name in ARM_JOINTS[side]]
-        self.joint_targets = controller.position[self.slots].copy()
-        client = scene.client
-        # Points are kept in the hand's URDF link frame: calculateJacobian works in that frame.
-        link_state = client.getLinkState(scene.robot, self.link)
-        self.local = list(link_state[2])  # the palm (the hand link's centre of mass)
-        self.status = "reaching"
-        if tool and grasps.holding("hose") == side and scene.hose is not None:
-            frame_pos, frame_orn = link_state[4], link_state[5]
-            obj_pos, _ = client.getBasePositionAndOrientation(scene.hose)
-            inv_pos, inv_orn = client.invertTransform(frame_pos, frame_orn)
-            self.local = list(client.multiplyTransforms(inv_pos, inv_orn, obj_pos, [0, 0, 0, 1])[0])
-
-    def point(self) -> np.ndarray:
-        """Return the world position of the point being moved."""
-        client = self.scene.client
-        state = client.getLinkState(self.scene.robot, self.link)
-        return np.array(client.multiplyTransforms(state[4], state[5], self.local, [0, 0, 0, 1])[0])
-
-    def update(self) -> None:
-        """One IK iteration from the measured error; the joint PIDs do the rest."""
-        client, controller = self.scene.client, self.controller
-        target = self.target
-        if self.frame == "pelvis":
-            pos, orn = client.getBasePositionAndOrientation(self.scene.robot)
-            target = np.array(client.multiplyTransforms(pos, orn, target.tolist(), [0, 0, 0, 1])[0])
-        error = target - self.point()
-        self.status = "reached" if np.linalg.norm(error) < REACH_TOLERANCE else "reaching"
-        positions = [0.0] * client.getNumJoints(self.scene.robot)
-        for slot, index in enumerate(controller.indices):
-            positions[index] = float(controller.position[slot])
-        zeros = [0.0] * len(positions)
-        linear, _ = client.calculateJacobian(
-            self.scene.robot, self.link, self.local, positions, zeros, zeros
-        )
-        # pybullet returns a floating base's Jacobian in the base frame: rotate it to world.
-        _, base_orn = client.getBasePositionAndOrientation(self.scene.robot)
-        jacobian = np.array(client.getMatrixFromQuaternion(base_orn)).reshape(3, 3) @ np.array(
-            linear
-        )
-        offset = jacobian.shape[1] - len(positions)  # a floating base adds 6 columns first
-        columns = [offset + controller.indices[slot] for slot in self.slots]
-        arm = jacobian[:, columns]
-        damping = 0.05**2 * np.eye(3)
-        step = arm.T @ np.linalg.solve(arm @ arm.T + damping, error)
-        step = np.clip(REACH_GAIN * step, -0.15, 0.15)
-        lower, upper = controller.lower[self.slots], controller.upper[self.slots]
-        self.joint_targets = np.clip(self.joint_targets + step, lower, upper)
-
-    def apply(self) -> None:
-        """Hold the arm's joint targets."""
-        for slot, value in zip(self.slots, self.joint_targets, strict=True):
-            self.controller.set_position(self.controller.names[slot], float(value))
 
 
 class Behaviours:
@@ -140,6 +65,10 @@ class Behaviours:
         self.pose_cmd = [pos[0], pos[1], self.client.getEulerFromQuaternion(orn)[2]]
         self.reaches: dict[str, Reach] = {}
         self.steps = 0
+        # "harness" (the balance assist carries the pelvis) or "joints" (the walker balances
+        # and walks through the leg joints only; experimental, see the README).
+        self.balance = "harness"
+        self.walker: Walker | None = None
         body = LEG_JOINTS + TRUNK_JOINTS
         self._body_slots = np.array([controller.slot[name] for name in body])
         self._stand_targets = np.array([humanoid.STAND_POSTURE.get(n, 0.0) for n in body])
@@ -172,10 +101,16 @@ class Behaviours:
         """Start behaviour `name`; return details for the reply; raise CommandError if refused."""
         if self.seat.seated and name in ("stand", "walk", "none"):
             raise CommandError(f"{name} is not possible in the vehicle (exit_vehicle first)")
+        if name in ("none", "enter_vehicle") or (
+            name in ("stand", "walk") and params.get("balance", "harness") == "harness"
+        ):
+            self._use_harness_balance()
         if name == "none":
             self.mode = "none"
             self.harness.release()
             self.reaches.clear()
+        elif name in ("stand", "walk") and params.get("balance") == "joints":
+            self._joint_balance(name, params, fallen)
         elif name == "stand":
             self._stand(recover=fallen)
         elif name == "walk":
@@ -233,6 +168,31 @@ class Behaviours:
             raise CommandError(f"unknown behaviour {name!r}")
         return {}
 
+    def _use_harness_balance(self) -> None:
+        if self.walker is not None and self.balance == "joints":
+            self.walker.release()
+        self.balance = "harness"
+
+    def _joint_balance(self, name: str, params: dict[str, Any], fallen: bool) -> None:
+        """Stand or walk with the walker: no harness, only the leg joints hold the robot."""
+        if fallen:
+            self._stand(recover=True)  # the recovery assist, then balance by the joints
+        self.harness.release()
+        if self.walker is None:
+            self.walker = Walker(self.scene, self.controller)
+        elif self.balance != "joints":
+            self.walker.use_gains()
+        if self.balance != "joints" or fallen:
+            self.walker.reset()
+        self.balance = "joints"
+        if name == "stand":
+            self.mode, self.walk_status = "stand", "idle"
+            return
+        gait = {k: float(params[k]) for k in GAIT_KEYS if k in params}
+        goal = params["pose"]
+        self.walker.walk_to((goal[0], goal[1], goal[2]), GaitParameters(**gait))
+        self.mode, self.walk_status = "walk", "walking"
+
     def _stand(self, recover: bool) -> None:
         client, robot = self.client, self.scene.robot
         pos, orn = client.getBasePositionAndOrientation(robot)
@@ -254,9 +214,15 @@ class Behaviours:
     def apply(self) -> None:
         """Run this physics step's share of every active behaviour."""
         self.steps += 1
-        if self.mode == "walk":
-            self._walk_step()
-        if self.mode in ("stand", "walk"):
+        if self.balance == "joints" and self.walker is not None and self.mode in ("stand", "walk"):
+            self.walker.apply()
+            if self.mode == "walk":
+                self.walk_status = self.walker.describe()
+                if self.walker.status != "walking":
+                    self.mode = "stand"
+        elif self.mode in ("stand", "walk"):
+            if self.mode == "walk":
+                self._walk_step()
             x, y, yaw = self.pose_cmd
             z = humanoid.STAND_PELVIS_HEIGHT + self.scene.ground_height(x, y)
             self.harness.hold(x, y, z, yaw)
@@ -366,6 +332,7 @@ class Behaviours:
         """Return what each behaviour is doing."""
         return {
             "mode": self.mode,
+            "balance": self.balance,
             "walk": self.walk_status,
             "reach": {side: reach.status for side, reach in self.reaches.items()},
             "held": {hand: name for hand, (_, name) in self.grasps.held.items()},

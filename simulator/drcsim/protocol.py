@@ -15,12 +15,21 @@ MAX_MESSAGE_BYTES = 64 * 1024
 MAX_STEPS = 10_000
 HANDS = ("left", "right")
 FRAMES = ("world", "pelvis")
+BALANCE = ("harness", "joints")
 OPS = ("hello", "state", "step", "joints", "behaviour", "stop")
 # Behaviour name -> its parameters and their kinds ("hand", "vec3", "float", "bool", "direction").
 BEHAVIOURS: dict[str, dict[str, str]] = {
     "none": {},
-    "stand": {},
-    "walk": {"pose": "vec3"},
+    "stand": {"balance": "balance?"},
+    "walk": {
+        "pose": "vec3",
+        "balance": "balance?",
+        "step_length": "float?",
+        "step_height": "float?",
+        "step_time": "float?",
+        "double_support": "float?",
+        "stance_width": "float?",
+    },
     "reach": {"hand": "hand", "target": "vec3", "tool": "bool?", "frame": "frame?"},
     "arm_rest": {"hand": "hand"},
     "grasp": {"hand": "hand"},
@@ -60,6 +69,10 @@ def _check_param(kind: str, value: Any, where: str) -> Any:
     if kind == "bool":
         if not isinstance(value, bool):
             raise ProtocolError(f"{where} must be true or false")
+        return value
+    if kind == "balance":
+        if value not in BALANCE:
+            raise ProtocolError(f"{where} must be one of {BALANCE}")
         return value
     if kind == "frame":
         if value not in FRAMES:

@@ -1,0 +1,341 @@
+"""The walking and balance behaviour: ZMP preview control and leg IK, through the joints only.
+
+As Boston Dynamics' behaviour library did for Atlas in the VRC, it turns "walk to this pose"
+into footsteps, a ZMP reference, a centre-of-mass trajectory (preview control on the
+cart-table model) and joint targets for both legs (analytic IK) at 1 kHz, with balance
+feedback from the IMU (torso tilt) on the stance ankle and hip. No force acts on the robot
+but gravity, contacts and its joints: walking too fast, on rubble or a slope can fall.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from drcsim.control import JointController
+from drcsim.gait import (
+    ANKLE_TO_SOLE,
+    HIP_OFFSET,
+    PREVIEW_DT,
+    PREVIEW_S,
+    Foothold,
+    GaitParameters,
+    PreviewAxis,
+    Swing,
+    leg_ik,
+    plan_poses,
+    rotation,
+    timeline,
+)
+from drcsim.models.humanoid import ALL_JOINTS
+from drcsim.scene import Scene
+
+LEGS = {
+    side: [f"{side[0]}_leg_{j}" for j in ("hpz", "hpx", "hpy", "kny", "aky", "akx")]
+    for side in ("left", "right")
+}
+TRUNK = ("back_bkz", "back_bky", "back_bkx")
+ARMATURE = 0.05  # kg m2 of reflected actuator inertia at the ankle (see use_gains)
+# PD gains while the walker owns the legs: stiff, and well damped (velocity feed-forward).
+GAINS = {
+    "hpz": (3000, 100),
+    "hpx": (6000, 200),
+    "hpy": (6000, 200),
+    "kny": (6000, 200),
+    "aky": (6000, 50),
+    "akx": (6000, 50),
+}
+TICK = 10  # physics steps per pattern-generator tick (100 Hz)
+TILT_GAIN = 1.0  # ankle and hip correction per radian of pelvis tilt (IMU)
+COM_GAIN = 3.0  # pelvis shift per metre of error of the measured centre of mass...
+COM_VELOCITY = 0.5  # ...with this share of its velocity term (capture point)
+VELOCITY_FILTER = 0.3  # per 100 Hz tick: low-pass on the measured COM velocity
+CORRECTION_LIMIT = 0.08  # m
+STRUGGLE_TILT = 0.12  # rad of pelvis tilt that the status reports as struggling
+POSITION_TOLERANCE = 0.05
+YAW_TOLERANCE = 0.08
+MAX_REPLANS = 3  # plans without progress before the walk gives up
+SWING_FROM_ACTUAL = 0.5  # share of the pelvis's tracking error the swing foot allows for
+PLAN_STEPS = 6  # steps planned at a time: then both feet down and a fresh plan
+
+
+class Walker:
+    """Keeps the robot balanced on its feet and walks it to goals, through the leg joints."""
+
+    def __init__(self, scene: Scene, controller: JointController) -> None:
+        self.scene, self.controller, self.client = scene, controller, scene.client
+        self.params = GaitParameters()
+        self.slots = {
+            side: np.array([controller.slot[n] for n in names]) for side, names in LEGS.items()
+        }
+        self.trunk_slots = np.array([controller.slot[n] for n in TRUNK])
+        self.links = {side: scene.robot_links[f"{side[0]}_foot"] for side in ("left", "right")}
+        self.use_gains()
+        self.reset()
+
+    def use_gains(self) -> None:
+        """Stiffen the legs: the stock ankle gains are barely above gravity's toppling rate."""
+        for side in ("l", "r"):
+            for part in ("foot", "talus"):
+                # Reflected actuator (rotor) inertia, as a physics engine's "armature": without
+                # it the light foot cannot take stiff explicit PD gains at 1 kHz.
+                self.client.changeDynamics(
+                    self.scene.robot,
+                    self.scene.robot_links[f"{side}_{part}"],
+                    localInertiaDiagonal=[ARMATURE] * 3,
+                )
+        for names in LEGS.values():
+            for name in names:
+                kp, kd = GAINS[name[6:]]
+                self.controller.set_gains(name, kp, 0.0, kd)
+
+    # -- state from the robot -------------------------------------------------------------
+    def _foot(self, side: str) -> Foothold:
+        state = self.client.getLinkState(self.scene.robot, self.links[side])
+        yaw = self.client.getEulerFromQuaternion(state[5])[2]
+        x, y, z = state[4]
+        return Foothold(x, y, z - ANKLE_TO_SOLE, yaw)
+
+    def _com_offset(self) -> np.ndarray:
+        client, robot = self.client, self.scene.robot
+        total, moment = 0.0, np.zeros(3)
+        for link in range(-1, client.getNumJoints(robot)):
+            mass = client.getDynamicsInfo(robot, link)[0]
+            if link < 0:
+                where = client.getBasePositionAndOrientation(robot)[0]
+            else:
+                where = client.getLinkState(robot, link)[0]
+            total, moment = total + mass, moment + mass * np.array(where)
+        pos, orn = client.getBasePositionAndOrientation(robot)
+        inverse = np.array(client.getMatrixFromQuaternion(orn)).reshape(3, 3).T
+        return inverse @ (moment / total - np.array(pos))
+
+    def _whole_com(self) -> np.ndarray:
+        client, robot = self.client, self.scene.robot
+        total, moment = 0.0, np.zeros(2)
+        for link in range(-1, client.getNumJoints(robot)):
+            mass = self.masses[link + 1]
+            if link < 0:
+                where = client.getBasePositionAndOrientation(robot)[0]
+            else:
+                where = client.getLinkState(robot, link)[0]
+            total, moment = total + mass, moment + mass * np.array(where[:2])
+        return moment / total
+
+    def reset(self) -> None:
+        """Take the robot as it stands now: feet where they are, the COM above them."""
+        self.feet = {side: self._foot(side) for side in ("left", "right")}
+        self.offset = self._com_offset()
+        pos, _ = self.client.getBasePositionAndOrientation(self.scene.robot)
+        yaw = self._yaw()
+        com = np.array(pos) + rotation(0, 0, yaw) @ self.offset
+        height = float(self.offset[2]) + self.params.pelvis_height
+        self.axes = (PreviewAxis(height, float(com[0])), PreviewAxis(height, float(com[1])))
+        self.com = com[:2].copy()
+        self.zmp: list[tuple[float, float]] = []
+        self.swings: list[Swing] = []
+        self.tick = 0
+        self.steps = 0
+        self.goal: tuple[float, float, float] | None = None
+        self.status = "standing"
+        self.replans = 0
+        self.pelvis_z = float(pos[2])
+        self.com_from = self.com.copy()
+        self.com_to = self.com.copy()
+        self.last_angles: dict[str, np.ndarray] = {}
+        self.velocity = np.zeros(2)
+        self.tilt = 0.0
+        self.active: Swing | None = None
+        self.masses = [
+            self.client.getDynamicsInfo(self.scene.robot, link)[0]
+            for link in range(-1, self.client.getNumJoints(self.scene.robot))
+        ]
+        self.com_measured = self._whole_com()
+
+    def _yaw(self) -> float:
+        _, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
+        return float(self.client.getEulerFromQuaternion(orn)[2])
+
+    # -- planning -------------------------------------------------------------------------
+    def walk_to(self, goal: tuple[float, float, float], params: GaitParameters) -> None:
+        """Plan footsteps from where the feet are to `goal` (pelvis x, y, yaw) and start."""
+        self.params = params.checked()
+        self.goal = goal
+        self.feet = {side: self._foot(side) for side in ("left", "right")}
+        # Start from the measured centre of mass, at rest (the robot stands on both feet).
+        measured = self._whole_com()
+        for index, (axis, value) in enumerate(zip(self.axes, measured, strict=True)):
+            axis.c = np.array([float(value), float(self.velocity[index]), 0.0])
+            axis.error = 0.0
+        self.com = self.com_from = self.com_to = measured.copy()
+        pos, _ = self.client.getBasePositionAndOrientation(self.scene.robot)
+        self.start_distance = math.hypot(goal[0] - pos[0], goal[1] - pos[1])
+        left, right = self.feet["left"], self.feet["right"]
+        mid = ((left.x + right.x) / 2, (left.y + right.y) / 2, self._mid_yaw())
+        # A few steps at a time, then both feet down and a fresh plan from where the feet
+        # really are: errors do not pile up over a long walk.
+        poses = plan_poses(mid, goal, self.params.step_length)[:PLAN_STEPS]
+        start = (float(self.com[0]), float(self.com[1]))
+        self.zmp, self.swings = timeline(
+            self.feet, poses, self.params, start, self.scene.ground_height
+        )
+        self.tick = 0
+        self.status = "walking"
+
+    def _mid_yaw(self) -> float:
+        a, b = self.feet["left"].yaw, self.feet["right"].yaw
+        return math.atan2(math.sin(a) + math.sin(b), math.cos(a) + math.cos(b))
+
+    # -- per step -------------------------------------------------------------------------
+    def apply(self) -> None:
+        """Compute this physics step's leg joint targets."""
+        self.steps += 1
+        if self.steps % TICK == 1 or TICK == 1:
+            self._pattern_tick()
+        self._joints()
+
+    def _pattern_tick(self) -> None:
+        horizon = round(PREVIEW_S / PREVIEW_DT)
+        if self.zmp:
+            ahead = self.zmp[self.tick : self.tick + horizon]
+            ahead += [self.zmp[-1]] * (horizon - len(ahead))
+        else:
+            still = (float(self.com[0]), float(self.com[1]))
+            ahead = [still] * horizon
+        future = np.array(ahead)
+        self.com_from = self.com_to
+        self.com_to = np.array([self.axes[0].step(future[:, 0]), self.axes[1].step(future[:, 1])])
+        self.active = next((w for w in self.swings if w.first <= self.tick < w.last), None)
+        for swing in self.swings:
+            if swing.last == self.tick:
+                self.feet[swing.side] = swing.end
+        if self.zmp and self.tick >= len(self.zmp) - 1:
+            self._finish()
+        else:
+            self.tick += 1
+
+    def _finish(self) -> None:
+        self.zmp, self.swings, self.tick = [], [], 0
+        if self.goal is None:
+            return
+        pos, _ = self.client.getBasePositionAndOrientation(self.scene.robot)
+        gx, gy, gyaw = self.goal
+        off = math.hypot(gx - pos[0], gy - pos[1])
+        yaw_off = abs((gyaw - self._yaw() + math.pi) % (2 * math.pi) - math.pi)
+        if off <= POSITION_TOLERANCE and yaw_off <= YAW_TOLERANCE:
+            self.status, self.goal = "done", None
+        elif off < self.start_distance - 0.1 or self.replans < MAX_REPLANS:
+            # Progress, or a few tries at the last centimetres: plan the next stretch.
+            if off >= self.start_distance - 0.1:
+                self.replans += 1
+            self.walk_to(self.goal, self.params)
+        else:
+            self.status, self.goal = f"blocked: {off:.2f} m short of the goal", None
+
+    def _swing_foot(self, swing: Swing) -> Foothold:
+        span = max(1, swing.last - swing.first)
+        tau = min(1.0, max(0.0, (self.tick + (self.steps % TICK) / TICK - swing.first) / span))
+        s = tau * tau * (3 - 2 * tau)
+        a, b = swing.start, swing.end
+        dyaw = (b.yaw - a.yaw + math.pi) % (2 * math.pi) - math.pi
+        lift = self.params.step_height * math.sin(math.pi * tau)
+        return Foothold(
+            a.x + (b.x - a.x) * s,
+            a.y + (b.y - a.y) * s,
+            a.z + (b.z - a.z) * s + lift,
+            a.yaw + dyaw * s,
+        )
+
+    def _joints(self) -> None:
+        # The pattern runs at 100 Hz; the joints follow its COM interpolated at 1 kHz.
+        share = ((self.steps - 1) % TICK + 1) / TICK
+        self.com = self.com_from + (self.com_to - self.com_from) * share
+        feet = dict(self.feet)
+        swing = self.active
+        if swing is not None:
+            feet[swing.side] = self._swing_foot(swing)
+        yaw = math.atan2(
+            sum(math.sin(f.yaw) for f in feet.values()), sum(math.cos(f.yaw) for f in feet.values())
+        )
+        ground = min(self.feet["left"].z, self.feet["right"].z)
+        if swing is not None:
+            ground = self.feet["left" if swing.side == "right" else "right"].z
+        self.pelvis_z += (ground + self.params.pelvis_height - self.pelvis_z) * 0.01
+        body = rotation(0.0, 0.0, yaw)
+        pelvis = self._pelvis_target(body)
+        # Balance from the IMU: tilt the legs against the pelvis's roll and pitch.
+        _, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
+        roll, pitch, _ = self.client.getEulerFromQuaternion(orn)
+        self.tilt = math.hypot(roll, pitch)
+        base = np.array(self.client.getBasePositionAndOrientation(self.scene.robot)[0])
+        for side, foot in feet.items():
+            stance = swing is None or swing.side != side
+            if not stance:
+                # The swing foot goes to its world target from where the pelvis really is.
+                real = pelvis + SWING_FROM_ACTUAL * (base - pelvis) * np.array([1.0, 1.0, 0.0])
+                self._leg(side, foot, real, body, (0.0, 0.0), (roll, pitch))
+                continue
+            self._leg(
+                side, foot, pelvis, body, (roll, pitch) if stance else (0.0, 0.0), (roll, pitch)
+            )
+        self.controller.set_slot_positions(self.trunk_slots, np.zeros(len(TRUNK)))
+
+    def _pelvis_target(self, body: np.ndarray) -> np.ndarray:
+        """Return where the pelvis should be for the COM plan, corrected by COM feedback."""
+        com_to_pelvis = body @ self.offset
+        # Centre-of-mass feedback: steer the pelvis against the measured COM's (and capture
+        # point's) error, the COM measured from the links' poses (kinematics and IMU).
+        omega = math.sqrt(9.81 / (float(self.offset[2]) + self.params.pelvis_height))
+        ref_velocity = (self.com_to - self.com_from) / (TICK * self.controller.timestep)
+        if (self.steps - 1) % TICK == 0:
+            whole = self._whole_com()
+            self.velocity += (
+                (whole - self.com_measured) / (TICK * self.controller.timestep) - self.velocity
+            ) * VELOCITY_FILTER
+            self.com_measured = whole
+        measured = self.com_measured + COM_VELOCITY * self.velocity / omega
+        wanted = self.com + COM_VELOCITY * ref_velocity / omega
+        correction = np.clip(COM_GAIN * (measured - wanted), -CORRECTION_LIMIT, CORRECTION_LIMIT)
+        target = self.com - correction
+        return np.array([target[0] - com_to_pelvis[0], target[1] - com_to_pelvis[1], self.pelvis_z])
+
+    def _leg(
+        self,
+        side: str,
+        foot: Foothold,
+        pelvis: np.ndarray,
+        body: np.ndarray,
+        ankle_tilt: tuple[float, float],
+        hip_tilt: tuple[float, float],
+    ) -> None:
+        """Set one leg's joint targets (IK plus tilt feedback) and velocity feed-forward."""
+        sign = 1.0 if side == "left" else -1.0
+        hip = pelvis + body @ np.array([HIP_OFFSET[0], sign * HIP_OFFSET[1], HIP_OFFSET[2]])
+        ankle = np.array([foot.x, foot.y, foot.z + ANKLE_TO_SOLE])
+        angles = np.array(leg_ik(hip, body, ankle, rotation(0.0, 0.0, foot.yaw)))
+        angles[4] += TILT_GAIN * ankle_tilt[1]  # stance ankle: the ankle strategy
+        angles[5] += TILT_GAIN * ankle_tilt[0]
+        angles[2] += TILT_GAIN * hip_tilt[1] * 0.5
+        angles[1] += TILT_GAIN * hip_tilt[0] * 0.5
+        self.controller.set_slot_positions(self.slots[side], angles)
+        # Velocity feed-forward: the damping resists only the tracking error, not motion.
+        previous = self.last_angles.get(side, angles)
+        velocity = (angles - previous) / self.controller.timestep
+        self.controller.target_velocity[self.slots[side]] = velocity
+        self.last_angles[side] = angles
+
+    def release(self) -> None:
+        """Give the legs back: stock gains, no velocity feed-forward."""
+        for names in LEGS.values():
+            for name in names:
+                slot = self.controller.slot[name]
+                self.controller.target_velocity[slot] = 0.0
+                spec = ALL_JOINTS[slot]
+                self.controller.set_gains(name, spec.kp, 0.0, spec.kd)
+
+    def describe(self) -> str:
+        """Return the walk status, saying when balance is struggling."""
+        if self.status == "walking" and self.tilt > STRUGGLE_TILT:
+            return f"walking (struggling: tilted {self.tilt:.2f} rad)"
+        return self.status

@@ -1,0 +1,83 @@
+"""The joint-level balance and walking behaviour: no harness, only the leg joints hold the robot."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from drcsim.errors import ProtocolError
+from drcsim.gait import leg_ik, rotation
+from drcsim.local import LocalClient
+from drcsim.protocol import check_command
+
+
+def _pelvis(sim) -> tuple[float, ...]:
+    return tuple(sim.client.getBasePositionAndOrientation(sim.scene.robot)[0])
+
+
+def test_leg_ik_puts_the_foot_where_asked(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "1")
+    client, robot = sim.client, sim.scene.robot
+    pelvis, body = np.array([0.05, 0.06, 0.86]), rotation(0.02, 0.0, 0.3)
+    client.resetBasePositionAndOrientation(
+        robot, pelvis.tolist(), client.getQuaternionFromEuler([0.02, 0.0, 0.3])
+    )
+    ankle = np.array([0.2, 0.15, 0.085])
+    hip = pelvis + body @ np.array([0.0, 0.09, -0.05])
+    angles = leg_ik(hip, body, ankle, rotation(0.0, 0.0, 0.5))
+    for name, angle in zip(("hpz", "hpx", "hpy", "kny", "aky", "akx"), angles, strict=True):
+        client.resetJointState(robot, sim.scene.robot_joints[f"l_leg_{name}"], angle)
+    state = client.getLinkState(robot, sim.scene.robot_links["l_foot"], computeForwardKinematics=1)
+    assert state[4] == pytest.approx(ankle.tolist(), abs=1e-4)
+    assert client.getEulerFromQuaternion(state[5]) == pytest.approx((0.0, 0.0, 0.5), abs=1e-4)
+
+
+def test_standing_and_walking_through_the_joints_alone(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "1")
+    client = LocalClient(sim)
+    client.behaviour("stand", balance="joints")
+    state = client.step(3000)
+    assert not sim.behaviours.harness.active and state["behaviour"]["balance"] == "joints"
+    assert state["score"]["falls"] == 0 and _pelvis(sim)[2] > 0.85
+    refused = client.request({"op": "joints", "position": {"l_leg_kny": 1.0}})
+    assert refused["ok"] is False and "owned by stand" in refused["error"]
+    client.behaviour("walk", pose=[1.5, 0.0, 0.0], balance="joints")
+    for _ in range(60):
+        state = client.step(500)
+        if state["behaviour"]["walk"] != "walking":
+            break
+    assert state["behaviour"]["walk"] == "done" and state["score"]["falls"] == 0
+    x, y, _ = _pelvis(sim)
+    assert math.hypot(x - 1.5, y) <= 0.05 and not sim.behaviours.harness.active
+
+
+def test_walking_too_fast_falls(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "1")
+    client = LocalClient(sim)
+    fast = {"step_time": 0.3, "double_support": 0.05, "step_length": 0.45}
+    client.behaviour("walk", pose=[3.0, 0.0, 0.0], balance="joints", **fast)
+    for _ in range(20):
+        state = client.step(500)
+        if state["score"]["falls"]:
+            break
+    assert state["score"]["falls"] == 1 and "struggling" in state["behaviour"]["walk"]
+
+
+def test_balance_must_be_harness_or_joints() -> None:
+    with pytest.raises(ProtocolError, match="balance"):
+        check_command({"op": "behaviour", "name": "walk", "pose": [1, 0, 0], "balance": "magic"})
+
+
+def test_joint_walking_is_deterministic(make_sim) -> None:
+    runs = []
+    for _ in range(2):
+        sim = make_sim("vrc_task_2", "3")
+        sim.apply_command(
+            check_command(
+                {"op": "behaviour", "name": "walk", "pose": [0.6, 1.2, 0.3], "balance": "joints"}
+            )
+        )
+        sim.step(2500)
+        runs.append(sim.state_vector())
+    assert runs[0] == runs[1]
