@@ -55,7 +55,7 @@ def list_teams(as_json: bool) -> None:
 
 @click.group()
 def user() -> None:
-    """Create and list users."""
+    """Create, list and change users."""
 
 
 @user.command("create")
@@ -100,3 +100,56 @@ def list_users(as_json: bool) -> None:
             f"{u.id}\t{u.email}\t{u.role.value}\t{u.team.name if u.team else '-'}" for u in users
         )
         emit([user_data(u) for u in users], as_json, lines or "no users")
+
+
+@user.command("update")
+@click.argument("who")
+@click.option("--role", type=click.Choice([r.value for r in Role]), help="New role.")
+@click.option("--team", "team_name", help="Move to this team (name or id).")
+@click.option("--no-team", is_flag=True, help="Take out of any team (officers and admins).")
+@click.option("--active/--inactive", default=None, help="Enable or disable the account.")
+@click.option("--name", default=None, help="New display name.")
+@click.option("--password-stdin", is_flag=True, help="Read a new password from standard input.")
+@click.option("--json", "as_json", is_flag=True, help="Print the user as JSON.")
+@reports_errors
+def update_user(
+    who: str,
+    role: str | None,
+    team_name: str | None,
+    no_team: bool,
+    active: bool | None,
+    name: str | None,
+    password_stdin: bool,
+    as_json: bool,
+) -> None:
+    """Change the role, team, active flag, name or password of WHO (e-mail or id).
+
+    The rules are the web's: the last active admin stays an admin; moving a user out of a team
+    or disabling them revokes their access to the team's constellations (VPN) at once.
+    """
+    if team_name and no_team:
+        raise click.UsageError("give --team or --no-team, not both")
+    password = sys.stdin.readline().rstrip("\n") if password_stdin else None
+    with app_context():
+        target = service.find_user(who)
+        team_id: int | service.Keep | None = service.Keep.KEEP
+        if team_name:
+            team_id = service.find_team(team_name).id
+        elif no_team:
+            team_id = None
+        updated = service.update_user(
+            None,
+            target.id,
+            name=name,
+            role=role,
+            team_id=team_id,
+            active=active,
+            password=password or None,
+        )
+        team = updated.team.name if updated.team else "no team"
+        state = "active" if updated.active else "disabled"
+        emit(
+            user_data(updated),
+            as_json,
+            f"updated {updated.email}: {updated.role.value}, {team}, {state}",
+        )

@@ -171,6 +171,17 @@ def get_user(actor: User | None, user_id: int) -> User:
     return user
 
 
+def find_user(email_or_id: str) -> User:
+    """Return the user with this e-mail address or numeric id (for the CLI)."""
+    text = email_or_id.strip()
+    user = db.session.scalar(select(User).where(User.email == text.lower()))
+    if user is None and text.isdigit() and len(text) < 10:
+        user = db.session.get(User, int(text))
+    if user is None:
+        raise NotFound(f"no user {email_or_id!r}")
+    return user
+
+
 def visible_users(actor: User | None, team_id: int | None = None) -> list[User]:
     """Return the users the actor may see: officers all, users their own team's."""
     query = select(User).order_by(User.email).options(selectinload(User.team))

@@ -125,8 +125,13 @@ def create_user() -> ResponseReturnValue:
 @role_required(Role.OFFICER)
 def edit_user(user_id: int) -> ResponseReturnValue:
     user = service.get_user(current_user, user_id)
+    # Not obj=user: WTForms would take user.team (a Team) over team= and select no team.
     form = _user_form(
-        obj=user, role=user.role.value, team=str(user.team_id or ""), active=user.active
+        email=user.email,
+        name=user.name,
+        role=user.role.value,
+        team=str(user.team_id or ""),
+        active=user.active,
     )
     status = 200
     if form.is_submitted():

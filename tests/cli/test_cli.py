@@ -176,3 +176,36 @@ def test_providers_are_configured_with_clear_errors(
         "ec2": True,
         "servers": True,
     }
+
+
+def test_user_update_moves_promotes_and_disables(run: Callable[..., Result]) -> None:
+    run("team", "create", "Red")
+    run("team", "create", "Blue")
+    run("user", "create", "--email", "pat@example.org", "--team", "Red")
+    run("user", "create", "--email", "root@example.org", "--role", "admin")
+    moved = run("user", "update", "pat@example.org", "--team", "Blue", "--name", "Pat", "--json")
+    assert moved.exit_code == 0, moved.output
+    assert json.loads(moved.output) | {"id": 0} == {
+        "id": 0,
+        "email": "pat@example.org",
+        "name": "Pat",
+        "role": "user",
+        "team": "Blue",
+        "active": True,
+    }
+    off = run("user", "update", "pat@example.org", "--inactive")
+    assert off.output.strip() == "updated pat@example.org: user, Blue, disabled"
+    up = run("user", "update", "pat@example.org", "--role", "officer", "--no-team", "--active")
+    assert up.output.strip() == "updated pat@example.org: officer, no team, active"
+    # The last admin stays one; a team user needs a team: one line, exit 1, nothing changed.
+    for args, message in (
+        (("root@example.org", "--role", "officer"), "at least one active admin"),
+        (("root@example.org", "--inactive"), "at least one active admin"),
+        (("pat@example.org", "--role", "user"), "must belong to a team"),
+        (("nobody@example.org", "--inactive"), "no user 'nobody@example.org'"),
+    ):
+        result = run("user", "update", *args)
+        assert result.exit_code == 1 and message in result.output, result.output
+    listing = {u["email"]: u for u in json.loads(run("user", "list", "--json").output)}
+    assert listing["root@example.org"]["role"] == "admin" and listing["root@example.org"]["active"]
+    assert listing["pat@example.org"]["role"] == "officer"
