@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from flask import Flask
+from hypothesis import HealthCheck, Phase, seed, settings
 
 from cloudsim.extensions import db
 from cloudsim.models import Constellation, ConstellationState, User
@@ -17,6 +18,23 @@ from tests.competition.support import finished_run, open_task, ready_constellati
 PERSONAS = ("anon", "user_a", "user_b", "officer", "admin")
 # One seed for every run, so that a failure reproduces; CLOUDSIM_FUZZ_SEED explores others.
 SEED = int(os.environ.get("CLOUDSIM_FUZZ_SEED", "20261122"))
+
+
+def seeded(examples: int) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """Decorate a Hypothesis test: `examples` at most, the fixed seed, no example database."""
+
+    def decorate(test: Callable[..., None]) -> Callable[..., None]:
+        return seed(SEED)(  # type: ignore[no-any-return]
+            settings(
+                max_examples=examples,
+                deadline=None,
+                database=None,
+                phases=[Phase.explicit, Phase.generate],
+                suppress_health_check=list(HealthCheck),
+            )(test)
+        )
+
+    return decorate
 
 
 def populate(app: Flask, people: dict[str, User | None], tmp: Path) -> None:

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 import schemathesis
 from flask import Flask
-from hypothesis import HealthCheck, Phase, given, seed, settings
+from hypothesis import given
 from schemathesis import GenerationMode
 from schemathesis.checks import not_a_server_error
 from schemathesis.specs.openapi.checks import (
@@ -26,7 +26,7 @@ from schemathesis.specs.openapi.checks import (
 from cloudsim.extensions import db
 from cloudsim.models import User
 from tests.conftest import token_for
-from tests.web.fuzz import PERSONAS, SEED, populate, watched_log
+from tests.web.fuzz import PERSONAS, SEED, populate, seeded, watched_log
 
 # Examples per operation and mode: anonymous calls all end at the 401, the others go deep.
 EXAMPLES = {"anon": 3, "user_a": 8, "user_b": 5, "officer": 8, "admin": 8}
@@ -45,15 +45,7 @@ def _fuzz_operation(
     """Run one operation's examples in one mode; return how many requests were sent."""
     sent = 0
 
-    @seed(SEED)
-    @settings(
-        max_examples=examples,
-        deadline=None,
-        database=None,
-        derandomize=False,
-        phases=[Phase.explicit, Phase.generate],
-        suppress_health_check=list(HealthCheck),
-    )
+    @seeded(examples)
     @given(case=operation.as_strategy(generation_mode=mode))  # type: ignore[attr-defined]
     def run(case: schemathesis.Case) -> None:
         nonlocal sent

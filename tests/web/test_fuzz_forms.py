@@ -19,14 +19,14 @@ from urllib.parse import urlencode
 import pytest
 from flask import Flask
 from flask.testing import FlaskClient
-from hypothesis import HealthCheck, Phase, given, seed, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import User
 from tests.conftest import log_in
-from tests.web.fuzz import PERSONAS, SEED, populate, watched_log
+from tests.web.fuzz import PERSONAS, SEED, populate, seeded, watched_log
 from tests.web.test_authorization_matrix import MATRIX, _url
 
 EXAMPLES = {"anon": 40, "user_a": 30, "user_b": 20, "officer": 50, "admin": 50}
@@ -188,14 +188,7 @@ def _fuzz_form(client: FlaskClient, form: Form, examples: int, crashes: list[str
     """Submit one form `examples` times; note every 5xx in crashes; return the count sent."""
     sent = 0
 
-    @seed(SEED)
-    @settings(
-        max_examples=examples,
-        deadline=None,
-        database=None,
-        phases=[Phase.explicit, Phase.generate],
-        suppress_health_check=list(HealthCheck),
-    )
+    @seeded(examples)
     @given(values=_values(form))
     def submit(values: dict[str, str | None]) -> None:
         nonlocal sent
