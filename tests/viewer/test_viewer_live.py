@@ -29,6 +29,7 @@ from tests.provisioners.ssh.conftest import (  # noqa: F401
 )
 from tests.provisioners.ssh.sshd_server import SshServer
 from tests.viewer.conftest import store_run, wait_for
+from tests.viewer.test_viewer_browser import ARTIFACTS
 from tests.web.test_browser import live_url, log_in_page, webgl_chromium  # noqa: F401
 
 pytestmark = pytest.mark.browser
@@ -96,6 +97,8 @@ def test_an_officer_watches_a_running_simulator_live(
     x, y, z = page.evaluate(f"cloudsimViewer.linkPosition({robot}, 0)")
     assert abs(x) < 0.5 and abs(y) < 0.5 and 0.6 < z < 1.2  # standing at the start
     assert "behind the simulator" in page.locator("h1 + p").inner_text()
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.locator("#viewer").screenshot(path=str(ARTIFACTS / "viewer-live.png"))
     page.context.close()  # nobody watches any more: the relay stops by itself
     follower.join(timeout=60)
     assert not follower.is_alive() and relay.frames > 40
