@@ -114,7 +114,9 @@ def cmd_ladder(args: argparse.Namespace) -> int:
     """Run the reference controllers over the worlds and configurations; print the table."""
     from drcsim.ladder import run_ladder
 
-    result = run_ladder(args.controller, args.world, args.config, args.time_limit, args.jobs)
+    result = run_ladder(
+        args.controller, args.world, args.config, args.time_limit, args.jobs, args.balance
+    )
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -135,7 +137,10 @@ def cmd_example(args: argparse.Namespace) -> int:
 
     with SimClient(args.server, args.port, timeout_s=10.0) as client:
         controller = CONTROLLERS[args.style](
-            client, log=lambda line: print(line, file=sys.stderr), timeout_s=args.timeout
+            client,
+            log=lambda line: print(line, file=sys.stderr),
+            timeout_s=args.timeout,
+            balance=args.balance,
         )
         if args.world and controller.info["world"] != args.world:
             raise DrcsimError(f"the server runs {controller.info['world']}, not {args.world}")
@@ -212,6 +217,7 @@ def build_parser() -> argparse.ArgumentParser:
     example.add_argument("--world", choices=WORLD_NAMES)
     example.add_argument("--timeout", type=float, default=900.0, help="wall seconds")
     example.add_argument("--style", default="example", choices=["naive", "example", "careful"])
+    example.add_argument("--balance", default="harness", choices=["harness", "joints"])
     example.set_defaults(func=cmd_example)
     ladder = sub.add_parser("ladder", help="reference controllers x worlds x configurations")
     ladder.add_argument("--controller", action="append", choices=["naive", "example", "careful"])
@@ -219,6 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     ladder.add_argument("--config", action="append", choices=CONFIG_NAMES)
     ladder.add_argument("--time-limit", type=float, default=600.0, help="simulated s per run")
     ladder.add_argument("--jobs", type=int, default=None, help="parallel runs (default: cores)")
+    ladder.add_argument("--balance", default="harness", choices=["harness", "joints"])
     ladder.add_argument("--json", action="store_true")
     ladder.set_defaults(func=cmd_ladder)
     follow = sub.add_parser("watch", help="print a running server's poses and score")

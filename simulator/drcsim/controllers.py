@@ -18,6 +18,8 @@ class NaiveController(ExampleController):
     walk_past = 0.2
     search = [(0.0, 0.0)]
     approach_door = False
+    walk_tries = 1
+    gait = {"step_time": 0.5, "double_support": 0.3, "step_length": 0.35}
 
 
 class CarefulController(ExampleController):
@@ -26,6 +28,8 @@ class CarefulController(ExampleController):
     throttle = 0.45
     steer_gain = 8.0
     walk_past = 1.2
+    walk_tries = 3
+    gait = {"step_time": 0.9, "double_support": 0.7, "step_length": 0.2}
     search = SEARCH + [
         (dx, dy) for dx in (-0.09, -0.03, 0.03, 0.09) for dy in (-0.09, -0.03, 0.03, 0.09)
     ]

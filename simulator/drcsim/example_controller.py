@@ -39,8 +39,17 @@ class ExampleController:
     walk_past = 1.0
     search = SEARCH
     approach_door = True
+    walk_tries = 2
+    gait: dict[str, float] = {}  # the walker's defaults (used with balance "joints")
 
-    def __init__(self, client: CommandAPI, log: Log = lambda _: None, timeout_s: float = 600.0):
+    def __init__(
+        self,
+        client: CommandAPI,
+        log: Log = lambda _: None,
+        timeout_s: float = 600.0,
+        balance: str = "harness",
+    ):
+        self.balance = balance
         self.client = client
         self.log = log
         self.info = client.hello()
@@ -89,9 +98,25 @@ class ExampleController:
 
     # -- building blocks --------------------------------------------------------------------
     def walk(self, x: float, y: float, yaw: float, limit_s: float = 90.0) -> dict[str, Any]:
-        """Walk to a pose and wait until the walk ends."""
-        self.client.behaviour("walk", pose=[x, y, yaw])
-        return self.until(lambda s: s["behaviour"]["walk"] != "walking", limit_s)
+        """Walk to a pose and wait until the walk ends; after a fall, get up and try again."""
+        for _ in range(self.walk_tries):
+            falls = self.client.state()["score"]["falls"]
+            self.client.behaviour("walk", pose=[x, y, yaw], **self.walk_params())
+            state = self.until(
+                lambda s: not str(s["behaviour"]["walk"]).startswith("walking"), limit_s
+            )
+            if state["score"]["ended"] or state["score"]["falls"] == falls:
+                return state
+            self.log(f"fell walking to {x:.2f} {y:.2f}: getting up")
+            self.client.behaviour("stand", balance=self.balance)  # the recovery assist
+            self.advance(1.0)
+        return state
+
+    def walk_params(self) -> dict[str, Any]:
+        """Return the walk behaviour's balance and gait parameters for this controller."""
+        if self.balance == "harness":
+            return {}
+        return {"balance": self.balance, **self.gait}
 
     def reach(
         self, hand: str, target: list[float], limit_s: float = 4.0, **params: Any

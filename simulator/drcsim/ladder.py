@@ -18,14 +18,16 @@ from drcsim.errors import ClientError
 from drcsim.worlds import CONFIG_NAMES, WORLD_NAMES
 
 
-def run_one(style: str, world: str, config: str, time_limit_s: float) -> dict[str, Any]:
+def run_one(
+    style: str, world: str, config: str, time_limit_s: float, balance: str = "harness"
+) -> dict[str, Any]:
     """Run controller `style` on one world and configuration; return its score row."""
     started = time.monotonic()
     process, port = start_server(world, config, ["--lockstep", "--time-limit", str(time_limit_s)])
     try:
         wait_ready(port, process)
         with SimClient("127.0.0.1", port, timeout_s=30.0) as client:
-            controller = CONTROLLERS[style](client, timeout_s=3600.0)
+            controller = CONTROLLERS[style](client, timeout_s=3600.0, balance=balance)
             note = None
             try:
                 score = controller.run()
@@ -56,6 +58,7 @@ def run_ladder(
     configs: list[str] | None = None,
     time_limit_s: float = 600.0,
     jobs: int | None = None,
+    balance: str = "harness",
 ) -> dict[str, Any]:
     """Run every (controller, world, config); return the rows and the totals per controller."""
     styles = styles or list(CONTROLLERS)
@@ -65,7 +68,9 @@ def run_ladder(
     jobs = jobs or max(1, os.cpu_count() or 1)
     started = time.monotonic()
     with ThreadPoolExecutor(max_workers=jobs) as pool:
-        rows = list(pool.map(lambda item: run_one(item[0], item[1], item[2], time_limit_s), work))
+        rows = list(
+            pool.map(lambda item: run_one(item[0], item[1], item[2], time_limit_s, balance), work)
+        )
     totals = {
         style: {
             "checkpoints": sum(r["checkpoints"] for r in rows if r["controller"] == style),
@@ -78,6 +83,7 @@ def run_ladder(
         "runs": rows,
         "totals": totals,
         "jobs": jobs,
+        "balance": balance,
         "time_limit_s": time_limit_s,
         "wall_s": round(time.monotonic() - started, 1),
     }

@@ -32,6 +32,9 @@ def test_bench_reports_every_world_and_the_round_trip() -> None:
     assert {(r["world"], r["sensors"]) for r in result["rtf"]} == {
         (w, s) for w in ("vrc_task_1", "vrc_task_2", "vrc_task_3") for s in (False, True)
     }
+    assert ("vrc_task_2", True, "joints") in {
+        (r["world"], r["sensors"], r["balance"]) for r in result["rtf"]
+    }
     assert result["round_trip"]["samples"] == 20
     assert result["round_trip"]["p99_ms"] >= result["round_trip"]["p50_ms"] > 0
 
@@ -57,6 +60,8 @@ def test_ladder_runs_reference_controllers_over_the_network_and_prints_the_table
         "8",
         "--jobs",
         "2",
+        "--balance",
+        "joints",
     )
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
@@ -67,3 +72,4 @@ def test_ladder_runs_reference_controllers_over_the_network_and_prints_the_table
     for row in result["runs"]:
         assert row["reason"] in ("time_limit", "complete") and 0 <= row["checkpoints"] <= 4
     assert result["totals"]["naive"]["of"] == 4 and result["jobs"] == 2
+    assert result["balance"] == "joints"
