@@ -26,9 +26,19 @@ def _digest(key: str) -> str:
     return hashlib.sha256(key.encode()).hexdigest()
 
 
+def _lifetime() -> timedelta:
+    return timedelta(hours=current_app.config["CLOUDSIM"].session_hours)
+
+
 def start_session(user: User) -> None:
     """Log the browser in as user with a new server-side session (the caller commits)."""
     key = secrets.token_urlsafe(32)
+    # The user's sessions that outlived their lifetime go now, so the table does not grow.
+    db.session.execute(
+        delete(LoginSession).where(
+            LoginSession.user_id == user.id, LoginSession.created_at < utcnow() - _lifetime()
+        )
+    )
     db.session.add(LoginSession(user=user, key_hash=_digest(key), address=request.remote_addr))
     login_user(user)
     session[SESSION_KEY] = key  # replaces the account id Flask-Login stored
@@ -60,8 +70,7 @@ def init_login(app: Flask) -> None:
         row = db.session.scalar(select(LoginSession).where(LoginSession.key_hash == _digest(key)))
         if row is None or not row.user.active:
             return None
-        lifetime = timedelta(hours=current_app.config["CLOUDSIM"].session_hours)
-        if row.created_at + lifetime < utcnow():
+        if row.created_at + _lifetime() < utcnow():
             return None  # the server ends it even if the browser kept the cookie
         return row.user
 

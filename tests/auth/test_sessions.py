@@ -74,6 +74,8 @@ def test_sessions_end_on_the_server_after_their_lifetime(
     db.session.execute(update(LoginSession).values(created_at=long_ago))
     db.session.commit()
     assert client.get("/account").status_code == 302
+    log_in(client, people["user_a"])  # type: ignore[arg-type]
+    assert db.session.scalar(select(func.count()).select_from(LoginSession)) == 1  # old one gone
 
 
 def test_a_password_change_ends_other_sessions_and_keeps_tokens(
