@@ -19,12 +19,12 @@ lint: install
 	$(BIN)/mypy cloudsim provisioners constellations templates migrations/__init__.py simulator/drcsim router/csrouter
 
 bench: install
-	$(BIN)/python bench/web.py
-	$(BIN)/python bench/provision.py
-	$(BIN)/python bench/local_hosts.py
-	$(BIN)/python bench/router.py
-	$(BIN)/python bench/run_logs.py
-	$(BIN)/python bench/viewer.py
+	$(BIN)/python -m bench.web
+	$(BIN)/python -m bench.provision
+	$(BIN)/python -m bench.local_hosts
+	$(BIN)/python -m bench.router
+	$(BIN)/python -m bench.run_logs
+	$(BIN)/python -m bench.viewer
 	$(BIN)/drcsim bench
 
 clean:

@@ -1,6 +1,6 @@
 """Benchmark the local provider: a network + N hosts created at once, memory per host, destroy.
 
-Run as root: `.venv/bin/python bench/local_hosts.py [--nodes 4] [--init systemd|minimal|both]`.
+Run as root: `.venv/bin/python -m bench.local_hosts [--nodes 4] [--init systemd|minimal|both]`.
 """
 
 import argparse
@@ -17,8 +17,8 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from cryptography.hazmat.primitives.serialization import Encoding, PublicFormat
 from libcloud.compute.base import Node, NodeAuthSSHKey
 
-from provisioners.local import netns, processes
-from provisioners.local.driver import LocalNodeDriver
+from provisioners.providers.local import netns, processes
+from provisioners.providers.local.driver import LocalNodeDriver
 
 
 @dataclass

@@ -2,30 +2,26 @@
 
 Needs root. Starts a private Redis and an in-process Celery worker (3 threads) on a fresh
 instance folder; the simulator's wheelhouse is built first and timed on its own (a real
-installation builds it once and caches it). Usage: python bench/provision.py
+installation builds it once and caches it). Usage: python -m bench.provision
 """
 
 from __future__ import annotations
 
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-PROJECT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(PROJECT))
+from celery.contrib.testing.worker import start_worker
 
-from celery.contrib.testing.worker import start_worker  # noqa: E402
-
-from cloudsim.app import create_app  # noqa: E402
-from cloudsim.config import Config  # noqa: E402
-from cloudsim.extensions import db  # noqa: E402
-from cloudsim.launched_constellations import service  # noqa: E402
-from cloudsim.models import Job  # noqa: E402
-from cloudsim.providers.service import open_provider  # noqa: E402
-from constellations.plans.software import build_wheelhouse, distribution_source  # noqa: E402
-from tests.support.servers import RedisServer  # noqa: E402
+from cloudsim.app import create_app
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.launched_constellations import service
+from cloudsim.models import Job
+from cloudsim.providers.service import open_provider
+from constellations.plans.software import build_wheelhouse, distribution_source
+from tests.support.servers import RedisServer
 
 
 def wait(job_ids: list[str]) -> float:

@@ -4,7 +4,7 @@ Boots the test lab (router, sim, OCU with the VPN up), then for idle and 1, 10 a
 of UDP load OCU->sim measures UDP echo round trips OCU->sim->OCU against 2 x 250 ms (mean,
 p99, and the part added over the undelayed round trip), the accounting error in payload
 bytes (counted by csrouter minus what was sent and received), csrouter's CPU share and how
-late csrouter itself released packets. Needs root. Usage: python bench/router.py [--seconds 8]
+late csrouter itself released packets. Needs root. Usage: python -m bench.router [--seconds 8]
 """
 
 from __future__ import annotations
@@ -13,19 +13,15 @@ import argparse
 import json
 import os
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-PROJECT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(PROJECT))
-
-from provisioners.local.driver import LocalNodeDriver  # noqa: E402
-from provisioners.ssh import ConnectPolicy, InMemoryHostKeyStore, SSHExecutor  # noqa: E402
-from tests.router import conftest as lab_support  # noqa: E402
-from tests.router.traffic import PROBE_BYTES  # noqa: E402
+from provisioners.providers.local.driver import LocalNodeDriver
+from provisioners.remote.ssh import ConnectPolicy, HostKeys, SSHExecutor
+from tests.router import conftest as lab_support
+from tests.router.traffic import PROBE_BYTES
 
 LATENCY_MS = 250
 PAYLOAD = 1200
@@ -104,7 +100,7 @@ def main() -> None:
         subnet_pool="10.217.0.0/16",
         public_cidr="198.18.17.0/24",
     )
-    executor = SSHExecutor(InMemoryHostKeyStore(), connect_policy=ConnectPolicy(deadline=60))
+    executor = SSHExecutor(HostKeys(), connect_policy=ConnectPolicy(deadline=60))
     try:
         started = time.monotonic()
         lab = lab_support._build_lab(driver, executor, scratch)

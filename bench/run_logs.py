@@ -4,7 +4,7 @@ Needs root. Launches a local `simple` constellation, writes a run's logs on its 
 state log SIZE_MB of random bytes), then times collect_logs twice: the first copy (remote
 sha256sum, SFTP stream, local checksum, store) and the second (checksums only: nothing is
 fetched again). Prints MB/s and the worker's peak memory growth. Usage:
-python bench/run_logs.py [SIZE_MB]
+python -m bench.run_logs [SIZE_MB]
 """
 
 from __future__ import annotations
@@ -18,20 +18,17 @@ import tempfile
 import time
 from pathlib import Path
 
-PROJECT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(PROJECT))
+from celery.contrib.testing.worker import start_worker
 
-from celery.contrib.testing.worker import start_worker  # noqa: E402
-
-from cloudsim.app import create_app  # noqa: E402
-from cloudsim.competition.artifacts import RUN_LOGS, LogStore, collect_logs, run_dir  # noqa: E402
-from cloudsim.competition.jobs import machines  # noqa: E402
-from cloudsim.config import Config  # noqa: E402
-from cloudsim.extensions import db  # noqa: E402
-from cloudsim.launched_constellations import service  # noqa: E402
-from cloudsim.models import Job, Run, RunState, Task, Team, utcnow  # noqa: E402
-from cloudsim.providers.service import open_provider  # noqa: E402
-from tests.support.servers import RedisServer  # noqa: E402
+from cloudsim.app import create_app
+from cloudsim.competition.artifacts import RUN_LOGS, LogStore, collect_logs, run_dir
+from cloudsim.competition.jobs import machines
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.launched_constellations import service
+from cloudsim.models import Job, Run, RunState, Task, Team, utcnow
+from cloudsim.providers.service import open_provider
+from tests.support.servers import RedisServer
 
 
 def main() -> None:

@@ -5,7 +5,7 @@ Runs without root: the simulator in-process, CloudSim under gunicorn with ONE wo
 private Redis and SQLite. The live relay's place is taken by a feeder that writes real
 frames into Redis at CLOUDSIM_VIEWER_LIVE_HZ, as the relay job does, so the figures are the
 web worker's. Every figure comes with a reference measured in the same run.
-Usage: python bench/viewer.py [--minutes 30] [--seconds 10]
+Usage: python -m bench.viewer [--minutes 30] [--seconds 10]
 """
 
 from __future__ import annotations
@@ -28,25 +28,21 @@ from typing import Any
 import msgpack
 import redis
 import requests
+from drcsim.engine import RunOptions, Simulation
+from drcsim.protocol import encode
+from drcsim.rundir import META, STATE
+from drcsim.runlog import read_states
 
-PROJECT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(PROJECT))
-
-from drcsim.engine import RunOptions, Simulation  # noqa: E402
-from drcsim.protocol import encode  # noqa: E402
-from drcsim.rundir import META, STATE  # noqa: E402
-from drcsim.runlog import read_states  # noqa: E402
-
-from bench.web import free_port  # noqa: E402
-from cloudsim import migrate  # noqa: E402
-from cloudsim.app import create_app  # noqa: E402
-from cloudsim.auth.passwords import hash_password  # noqa: E402
-from cloudsim.config import Config  # noqa: E402
-from cloudsim.extensions import db  # noqa: E402
-from cloudsim.models import Role, Run, RunState, Task, Team, User, utcnow  # noqa: E402
-from cloudsim.viewer.live import store_frame  # noqa: E402
-from tests.competition.support import store_log  # noqa: E402
-from tests.support.servers import RedisServer  # noqa: E402
+from bench.web import free_port
+from cloudsim import migrate
+from cloudsim.app import create_app
+from cloudsim.auth.passwords import hash_password
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.models import Role, Run, RunState, Task, Team, User, utcnow
+from cloudsim.viewer.live import store_frame
+from tests.competition.support import store_log
+from tests.support.servers import RedisServer
 
 PASSWORD = "benchmark password"
 POLL_S = 0.5  # what viewer.js does with the default CLOUDSIM_VIEWER_POLL_MS (2 x 250 ms)
@@ -268,7 +264,7 @@ def main() -> None:
         finished, live = seed(env, logs, args.minutes)
         argv = [sys.executable, "-m", "gunicorn", "--bind", f"127.0.0.1:{web}", "--workers", "1"]
         gunicorn = subprocess.Popen(
-            [*argv, "cloudsim.wsgi:app"], env=env, cwd=PROJECT, stderr=subprocess.DEVNULL
+            [*argv, "cloudsim.wsgi:app"], env=env, cwd=Path.cwd(), stderr=subprocess.DEVNULL
         )
         base = f"http://127.0.0.1:{web}"
         deadline = time.monotonic() + 60

@@ -2,7 +2,7 @@
 
 Seeds 30 teams, 120 machines, 300 users and 1,000 jobs into a fresh instance, starts the
 production stack with `cloudsim up` (gunicorn, private Redis) on free loopback ports, and
-drives it with concurrent clients. Usage: python bench/web.py [--clients 20] [--rounds 15]
+drives it with concurrent clients. Usage: python -m bench.web [--clients 20] [--rounds 15]
 """
 
 from __future__ import annotations
@@ -24,16 +24,13 @@ from pathlib import Path
 
 import requests
 
-PROJECT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(PROJECT))
-
-from cloudsim import migrate  # noqa: E402
-from cloudsim.app import create_app  # noqa: E402
-from cloudsim.auth.passwords import hash_password  # noqa: E402
-from cloudsim.auth.tokens import issue_token  # noqa: E402
-from cloudsim.config import Config  # noqa: E402
-from cloudsim.extensions import db  # noqa: E402
-from cloudsim.models import (  # noqa: E402
+from cloudsim import migrate
+from cloudsim.app import create_app
+from cloudsim.auth.passwords import hash_password
+from cloudsim.auth.tokens import issue_token
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.models import (
     Constellation,
     ConstellationState,
     Job,
@@ -202,7 +199,7 @@ def main() -> None:
             env=env,
             stdout=out,
             stderr=subprocess.STDOUT,
-            cwd=PROJECT,
+            cwd=Path.cwd(),
         )
     try:
         deadline = time.monotonic() + 90

@@ -11,7 +11,7 @@ from typing import Any
 
 import yaml
 
-from provisioners.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule, check_role_name
+from provisioners.remote.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule, check_role_name
 
 KINDS_DIR: Traversable = resources.files("constellations").joinpath("kinds")
 PUBLIC = "public"  # the outside world, in reachability checks

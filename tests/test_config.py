@@ -10,8 +10,6 @@ import pytest
 
 from cloudsim.config import SETTINGS, Config, ConfigError
 
-README = Path(__file__).resolve().parents[1] / "README.md"
-
 
 def test_defaults_generate_private_keys_once(tmp_path: Path) -> None:
     env = {"CLOUDSIM_INSTANCE_DIR": str(tmp_path)}
@@ -39,6 +37,7 @@ def test_bad_values_are_named(tmp_path: Path, name: str, value: str, message: st
         Config.from_env({"CLOUDSIM_INSTANCE_DIR": str(tmp_path), name: value})
 
 
-def test_readme_documents_every_setting() -> None:
-    table = set(re.findall(r"^\| `(CLOUDSIM_[A-Z0-9_]+)` \|", README.read_text(), re.MULTILINE))
+def test_readme_documents_every_setting(pytestconfig: pytest.Config) -> None:
+    readme = (pytestconfig.rootpath / "README.md").read_text()
+    table = set(re.findall(r"^\| `(CLOUDSIM_[A-Z0-9_]+)` \|", readme, re.MULTILINE))
     assert table == set(SETTINGS), f"README table differs: {table ^ set(SETTINGS)}"

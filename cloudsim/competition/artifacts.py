@@ -24,8 +24,8 @@ from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.router_control import BANDWIDTH_LOG
 from cloudsim.models import Artifact, Run
-from provisioners.ssh import Machine as Target
-from provisioners.ssh import SSHError, SSHExecutor
+from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import SSHError, SSHExecutor
 
 RUNS_DIR = "/var/lib/cloudsim/runs"
 CHUNK = 1 << 20

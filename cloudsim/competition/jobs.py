@@ -35,12 +35,11 @@ from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.jobs.service import enqueue
 from cloudsim.launched_constellations import router_control
-from cloudsim.launched_constellations.connect import MachineHostKeys, targets
+from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair
 from cloudsim.models import Job, JobState, Run, RunState, ScoreEvent, utcnow
-from cloudsim.providers.service import open_provider
-from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
-from provisioners.ssh import Machine as Target
+from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor
+from provisioners.remote.ssh import Machine as Target
 
 log = logging.getLogger(__name__)
 ROUTER_FAULT = "router fault (OCU traffic is held until it is fixed): "
@@ -87,15 +86,14 @@ def machines(
     if constellation is None:
         raise RunError(f"run {run.id}: its constellation no longer exists")
     keys = constellation_keypair(constellation)
-    nodes = open_provider(constellation.provider, config).nodes(constellation.name)
-    reach = targets(constellation, nodes, keys)
+    reach = targets(constellation, keys, config)
     by_role = {m.role: m for m in constellation.machines}
     sim = by_role.get("sim")
     if sim is None or not sim.private_ip:
         raise RunError(f"{constellation.name} has no simulator machine")
     router = by_role.get("router")
     executor = SSHExecutor(
-        MachineHostKeys(constellation),
+        machine_host_keys(constellation),
         log_sink=ctx.line_sink() if ctx else sink,
         secrets=[keys.private],
         connect_policy=ConnectPolicy(deadline=60),

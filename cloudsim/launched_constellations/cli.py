@@ -10,14 +10,14 @@ import click
 from cloudsim.cli import app_context, emit, reports_errors
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service
-from cloudsim.launched_constellations.connect import MachineHostKeys, targets
+from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair
 from cloudsim.launched_constellations.reconcile import destroy_orphans, find_orphans
 from cloudsim.models import Constellation, Job
 from cloudsim.people.service import find_team
-from cloudsim.providers.service import PROVIDERS, open_provider
+from cloudsim.providers.service import PROVIDERS
 from constellations.definition import available_kinds
-from provisioners.ssh import SSHExecutor
+from provisioners.remote.ssh import SSHExecutor
 
 WORKER_HINT_SECONDS = 10
 
@@ -198,13 +198,12 @@ def ssh(name: str, machine: str, command: tuple[str, ...]) -> None:
     with app_context() as app:
         found = service.get_constellation(None, name)
         keys = constellation_keypair(found)
-        provider = open_provider(found.provider, app.config["CLOUDSIM"])
-        reach = targets(found, provider.nodes(found.name), keys)
+        reach = targets(found, keys, app.config["CLOUDSIM"])
         if machine not in reach:
             raise click.ClickException(
                 f"{name} has no machine {machine!r} (machines: {', '.join(reach)})"
             )
-        with SSHExecutor(MachineHostKeys(found), secrets=[keys.private]) as executor:
+        with SSHExecutor(machine_host_keys(found), secrets=[keys.private]) as executor:
             result = executor.run(reach[machine], " ".join(command), check=False)
         click.echo(result.stdout, nl=False)
         click.echo(result.stderr, nl=False, err=True)

@@ -1,40 +1,38 @@
-"""Reach machines over SSH: targets for the executor, host keys kept in the database."""
+"""Reach machines over SSH: routes recorded on the machines' rows, host keys kept there too."""
 
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import replace
 
 from libcloud.compute.base import Node
 from sqlalchemy import update
-from sqlalchemy.engine import Engine
 
+from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.keys import KeyPair
 from cloudsim.models import Constellation, Machine
-from provisioners.ssh import Machine as Target
+from cloudsim.providers.service import Provider, open_provider
+from provisioners.providers.base import BEHIND_PUBLIC_MACHINE
+from provisioners.remote.ssh import HostKeys, Route
+from provisioners.remote.ssh import Machine as Target
 
 
-class MachineHostKeys:
-    """Trust-on-first-use host keys kept on the machines' rows (usable from worker threads)."""
+def machine_host_keys(constellation: Constellation) -> HostKeys:
+    """Return trust-on-first-use host keys kept on the machines' rows (usable from threads)."""
+    engine = db.engine  # worker threads write on their own connections
+    ids = {target_name(constellation, m.name): m.id for m in constellation.machines}
+    keys = {target_name(constellation, m.name): m.host_key for m in constellation.machines}
 
-    def __init__(self, constellation: Constellation) -> None:
-        self._engine: Engine = db.engine
-        self._ids = {target_name(constellation, m.name): m.id for m in constellation.machines}
-        self._keys = {
-            target_name(constellation, m.name): m.host_key for m in constellation.machines
-        }
-
-    def get(self, machine_name: str) -> str | None:
-        return self._keys.get(machine_name)
-
-    def put(self, machine_name: str, key_type_and_base64: str) -> None:
-        self._keys[machine_name] = key_type_and_base64
-        with self._engine.begin() as conn:
+    def record(machine_name: str, key_type_and_base64: str) -> None:
+        with engine.begin() as conn:
             conn.execute(
                 update(Machine)
-                .where(Machine.id == self._ids[machine_name])
+                .where(Machine.id == ids[machine_name])
                 .values(host_key=key_type_and_base64)
             )
+
+    return HostKeys(lookup=keys.get, record=record)
 
 
 def target_name(constellation: Constellation, machine_name: str) -> str:
@@ -42,52 +40,44 @@ def target_name(constellation: Constellation, machine_name: str) -> str:
     return f"{constellation.name}/{machine_name}"
 
 
-def targets(
-    constellation: Constellation, nodes: Iterable[Node], keys: KeyPair
-) -> dict[str, Target]:
-    """Return an SSH target per machine name.
+def record_routes(constellation: Constellation, provider: Provider, nodes: Iterable[Node]) -> None:
+    """Store on each machine's row how the controller reaches it, as the provider says.
 
-    A provider that can carry the connection itself (the local one: into a namespace) says so
-    with `ssh_proxy_command`; otherwise public machines are reached directly and private ones
-    through the first public machine, as a jump host.
+    Asked once, when the machines are created: runs and the beat then reach them from the
+    rows alone, without listing the provider's nodes.
     """
-    by_name = {
-        node.extra.get("tags", {}).get("cloudsim:machine", node.name): node for node in nodes
+    rows = {m.name: m for m in constellation.machines}
+    public = next((m.name for m in constellation.machines if m.public_ip), None)
+    for node in nodes:
+        row = rows.get(node.extra.get("tags", {}).get("cloudsim:machine", node.name))
+        if row is None:
+            continue
+        route = provider.driver.ex_ssh_route(node)
+        if route.jump == BEHIND_PUBLIC_MACHINE:
+            route = replace(route, jump=public if public != row.name else None)
+        row.ssh_route = route.to_json()
+
+
+def targets(constellation: Constellation, keys: KeyPair, config: Config) -> dict[str, Target]:
+    """Return an SSH target per machine name, from the routes on the machines' rows."""
+    if any(m.ssh_route is None for m in constellation.machines):
+        # rows from before routes were recorded: ask the provider once
+        provider = open_provider(constellation.provider, config)
+        record_routes(constellation, provider, provider.nodes(constellation.name))
+        db.session.commit()
+    routes = {
+        m.name: Route.from_json(m.ssh_route) if m.ssh_route else Route(host=m.private_ip or "")
+        for m in constellation.machines
     }
-    public = next((m for m in constellation.machines if m.public_ip), None)
     result: dict[str, Target] = {}
-    jump: Target | None = None
-    if public is not None:
-        jump = _target(constellation, public, by_name.get(public.name), keys, None)
-    for machine in constellation.machines:
-        result[machine.name] = _target(
-            constellation, machine, by_name.get(machine.name), keys, jump
-        )
+
+    def target(name: str) -> Target:
+        if name not in result:
+            route = routes[name]
+            jump = target(route.jump) if route.jump else None
+            result[name] = route.target(target_name(constellation, name), keys.private, jump)
+        return result[name]
+
+    for name in routes:
+        target(name)
     return result
-
-
-def _target(
-    constellation: Constellation,
-    machine: Machine,
-    node: Node | None,
-    keys: KeyPair,
-    jump: Target | None,
-) -> Target:
-    name = target_name(constellation, machine.name)
-    extra = node.extra if node is not None else {}
-    login = {"user": extra.get("ssh_user", "root"), "port": int(extra.get("ssh_port", 22))}
-    if extra.get("ssh_proxy_command"):
-        return Target(
-            name=name,
-            host=machine.private_ip or "",
-            private_key=keys.private,
-            proxy_command=list(extra["ssh_proxy_command"]),
-            **login,
-        )
-    # Existing servers say where the controller reaches them; cloud machines do not.
-    address = extra.get("ssh_address") or machine.public_ip
-    if address:
-        return Target(name=name, host=address, private_key=keys.private, **login)
-    return Target(
-        name=name, host=machine.private_ip or "", private_key=keys.private, jump=jump, **login
-    )

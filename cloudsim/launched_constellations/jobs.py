@@ -9,7 +9,6 @@ leaking machines.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from typing import Any, TypeVar
 
 from flask import current_app
@@ -20,29 +19,27 @@ from cloudsim.config import Config
 from cloudsim.errors import CloudSimError, NotFound
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
-from cloudsim.launched_constellations.connect import MachineHostKeys, targets
+from cloudsim.launched_constellations.connect import (
+    machine_host_keys,
+    record_routes,
+    targets,
+)
 from cloudsim.launched_constellations.keys import (
     KeyPair,
     constellation_keypair,
-    instance_admin_password,
 )
+from cloudsim.launched_constellations.software import Supply, supply_needs
 from cloudsim.launched_constellations.verify import verify_constellation
-from cloudsim.launched_constellations.vpn import server_material
 from cloudsim.models import Constellation, ConstellationState, MachineState, Secret
-from cloudsim.providers.service import NetworkDriver, Provider, open_provider
+from cloudsim.providers.service import Provider, open_provider
 from constellations.definition import ConstellationKind, load_kind
-from constellations.plans import PLANS, Action, PlanContext, PlanItem, firewall
-from constellations.plans.software import (
-    build_source_bundle,
-    build_wheelhouse,
-    distribution_source,
-)
-from provisioners.operations import apply
-from provisioners.ssh import ConnectPolicy, SSHError, SSHExecutor
-from provisioners.ssh import Machine as Target
+from constellations.plans import PLANS, Action, Need, PlanContext, PlanItem, firewall, needs_of
+from provisioners.providers.base import CloudSimNodeDriver
+from provisioners.remote.operations import apply
+from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor
+from provisioners.remote.ssh import Machine as Target
 
 T = TypeVar("T")
-NEEDS_WHEELHOUSE = {"simulator", "field_computer"}
 BOOTING = (NodeState.PENDING, NodeState.STARTING, NodeState.REBOOTING)
 
 
@@ -92,75 +89,36 @@ def _launch(
     subnet = ensure_network(ctx, driver, constellation, kind)
     ctx.stage("machines", 10)
     nodes = ensure_machines(ctx, provider, constellation, kind, keys, subnet)
+    record_routes(constellation, provider, nodes)
+    db.session.commit()
     executor = SSHExecutor(
-        MachineHostKeys(constellation),
+        machine_host_keys(constellation),
         log_sink=ctx.line_sink(),
         secrets=[keys.private],
         connect_policy=ConnectPolicy(deadline=120),
     )
     with executor:
-        reach = targets(constellation, nodes, keys)
+        reach = targets(constellation, keys, config)
         contexts = {
             m.name: _plan_context(constellation, kind, m.name, subnet, config)
             for m in kind.machines
         }
         ctx.stage("firewall", 40)
-        if hasattr(driver, "ex_apply_firewall"):
-            driver.ex_apply_firewall(
-                _network(driver, constellation), list(kind.firewall), kind.roles
-            )
+        driver.ex_apply_firewall(
+            driver.ex_get_network(constellation.name), kind.firewall, kind.roles
+        )
         _deploy(ctx, executor, reach, {n: firewall(c) for n, c in contexts.items()})
         ctx.stage("install", 50)
-        contexts = _with_software(ctx, executor, constellation, kind, contexts, config)
+        contexts = supply_needs(Supply(ctx, executor, constellation, config), contexts)
         plans = {
             n: [item for plan in c.machine.plan for item in PLANS[plan](c)]
             for n, c in contexts.items()
         }
         _deploy(ctx, executor, reach, plans)
         ctx.stage("verify", 80)
-        verify_constellation(ctx, executor, constellation, kind, reach, provider.public_probe)
-
-
-def _with_software(
-    ctx: JobContext,
-    executor: SSHExecutor,
-    constellation: Constellation,
-    kind: ConstellationKind,
-    contexts: dict[str, PlanContext],
-    config: Config,
-) -> dict[str, PlanContext]:
-    """Add to the plan contexts what the plans install: wheelhouses, bundles, VPN keys."""
-    cache = config.instance_dir / "wheelhouse"
-    used = {plan for machine in kind.machines for plan in machine.plan}
-    if used & NEEDS_WHEELHOUSE:
-        ctx.log("building the simulator's wheelhouse (cached after the first time)")
-        wheelhouse = build_wheelhouse(distribution_source("drcsim"), cache, config.machine_python)
-        contexts = {n: replace(c, wheelhouse=wheelhouse) for n, c in contexts.items()}
-    if "cloudsim_server" in used:
-        ctx.log("bundling CloudSim's source and wheels (cached after the first time)")
-        password = instance_admin_password(constellation)
-        ctx.mask(password)
-        executor.add_secret(password)
-        members = [distribution_source("drcsim"), distribution_source("cloudsim-router")]
-        root = distribution_source("cloudsim")
-        bundle = build_source_bundle(root, cache, config.machine_python, members)
-        secrets = {"cloudsim_admin_password": password}
-        contexts = {n: replace(c, app_bundle=bundle, secrets=secrets) for n, c in contexts.items()}
-    if "router" in used:
-        ctx.log("building the router's wheelhouse and the team VPN's keys")
-        material = server_material(constellation)
-        ctx.mask(material.server_key)
-        executor.add_secret(material.server_key)
-        router_wheels = build_wheelhouse(
-            distribution_source("cloudsim-router"), cache, config.machine_python
+        verify_constellation(
+            ctx, executor, constellation, kind, reach, driver.ex_public_proxy_command
         )
-        contexts = {
-            n: replace(c, vpn=material, router_wheelhouse=router_wheels)
-            if "router" in c.machine.plan
-            else c
-            for n, c in contexts.items()
-        }
-    return contexts
 
 
 @job_kind("constellation.refresh_vpn")
@@ -175,29 +133,31 @@ def refresh_vpn(ctx: JobContext) -> None:
         return
     config: Config = current_app.config["CLOUDSIM"]
     kind = load_kind(constellation.kind, set(PLANS))
-    routers = [m for m in kind.machines if "router" in m.plan]
+    # the machines whose plans deploy the VPN, and just those plans
+    routers = [m for m in kind.machines if Need.VPN in needs_of(m.plan)]
     keys = constellation_keypair(constellation)
-    provider = open_provider(constellation.provider, config)
     subnet = constellation.resources["subnet"]
     with SSHExecutor(
-        MachineHostKeys(constellation), log_sink=ctx.line_sink(), secrets=[keys.private]
+        machine_host_keys(constellation), log_sink=ctx.line_sink(), secrets=[keys.private]
     ) as executor:
-        reach = targets(constellation, provider.nodes(constellation.name), keys)
+        reach = targets(constellation, keys, config)
         contexts = {
             m.name: _plan_context(constellation, kind, m.name, subnet, config) for m in routers
         }
         ctx.stage("vpn", 30)
-        contexts = _with_software(ctx, executor, constellation, kind, contexts, config)
-        plans = {n: PLANS["router"](c) for n, c in contexts.items()}
+        contexts = supply_needs(Supply(ctx, executor, constellation, config), contexts)
+        plans = {
+            n: [item for p in c.machine.plan if Need.VPN in needs_of([p]) for item in PLANS[p](c)]
+            for n, c in contexts.items()
+        }
         _deploy(ctx, executor, {n: reach[n] for n in plans}, plans)
 
 
-def _network(driver: NetworkDriver, constellation: Constellation) -> Any:
-    return driver.ex_get_network(constellation.name)
-
-
 def ensure_network(
-    ctx: JobContext, driver: NetworkDriver, constellation: Constellation, kind: ConstellationKind
+    ctx: JobContext,
+    driver: CloudSimNodeDriver,
+    constellation: Constellation,
+    kind: ConstellationKind,
 ) -> str:
     """Create the private network once; return its subnet."""
     existing = {n.name: n for n in driver.ex_list_networks()}
@@ -228,7 +188,7 @@ def ensure_machines(
 ) -> list[Node]:
     """Create every machine the provider does not have running; replace broken ones."""
     driver = provider.driver
-    network = _network(driver, constellation)
+    network = driver.ex_get_network(constellation.name)
     have = {
         node.extra["tags"].get("cloudsim:machine"): node
         for node in provider.nodes(constellation.name)
@@ -238,7 +198,7 @@ def ensure_machines(
         node = have.get(definition.name)
         if node is not None and node.state in BOOTING:
             ctx.log(f"{definition.name}: still {node.state}; waiting for it")
-            have[definition.name] = driver.wait_until_running([node])[0][0]  # type: ignore[attr-defined]
+            have[definition.name] = driver.wait_until_running([node])[0][0]
         elif node is not None and node.state != NodeState.RUNNING:
             ctx.log(f"{definition.name}: found {node.state}; replacing it")
             driver.destroy_node(node)

@@ -16,8 +16,8 @@ from csrouter import protocol
 
 from cloudsim.errors import CloudSimError
 from constellations.plans.router import CSROUTER_COMMAND
-from provisioners.ssh import Machine as Target
-from provisioners.ssh import SSHError, SSHExecutor
+from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import SSHError, SSHExecutor
 
 BANDWIDTH_LOG = protocol.BANDWIDTH_LOG
 CONTROL_TIMEOUT = 30

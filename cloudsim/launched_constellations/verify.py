@@ -14,13 +14,14 @@ from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext
 from cloudsim.models import Constellation, utcnow
 from constellations.definition import PUBLIC, ConstellationKind, Reachability
-from provisioners.ssh import Machine as Target
-from provisioners.ssh import SSHExecutor
+from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import SSHExecutor
 
 PROBE_SECONDS = 3
 SELFTEST = "/opt/drcsim/bin/drcsim selftest --seconds 2 --no-sensors --min-rtf 0 --json"
 
-PublicProbe = Callable[[str, int], list[str]]
+# the provider's way to reach ip:port from "the internet" (an argv), None: from here
+PublicProbe = Callable[[str, int], list[str] | None]
 
 
 class VerificationFailed(CloudSimError):
@@ -33,7 +34,7 @@ def verify_constellation(
     constellation: Constellation,
     kind: ConstellationKind,
     reach: dict[str, Target],
-    public_probe: PublicProbe | None,
+    public_probe: PublicProbe,
 ) -> None:
     """Run every check, store the results per machine, raise listing the failures."""
     results: dict[str, dict[str, Any]] = {m.name: {"checks": []} for m in constellation.machines}
@@ -102,9 +103,10 @@ def _probe_from(executor: SSHExecutor, source: Target, address: str, port: int) 
     return executor.run(source, command, check=False, timeout=PROBE_SECONDS + 10).ok
 
 
-def _probe_public(public_probe: PublicProbe | None, address: str, port: int) -> bool:
+def _probe_public(public_probe: PublicProbe, address: str, port: int) -> bool:
     """Return True when "the internet" (the provider's public side, or here) reaches address."""
-    if public_probe is None:
+    argv = public_probe(address, port)
+    if argv is None:
         try:
             with socket.create_connection((address, port), timeout=PROBE_SECONDS):
                 return True
@@ -112,7 +114,7 @@ def _probe_public(public_probe: PublicProbe | None, address: str, port: int) -> 
             return False
     try:
         result = subprocess.run(
-            public_probe(address, port),
+            argv,
             stdin=subprocess.DEVNULL,
             capture_output=True,
             timeout=PROBE_SECONDS,

@@ -17,8 +17,8 @@ from cloudsim.launched_constellations.keys import constellation_secret
 from cloudsim.models import Constellation, ConstellationState, Role, Secret, SecretKind, User
 from constellations.plans.base import VpnMaterial
 from constellations.plans.router import VPN_SERVER_NAME
-from provisioners import pki
-from provisioners.operations import MachineTemplates
+from provisioners.remote import pki
+from provisioners.remote.operations import MachineTemplates
 
 CA = "vpn-ca"
 SERVER = "vpn-server"

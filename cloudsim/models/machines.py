@@ -88,6 +88,8 @@ class Machine(Base):
     private_ip: Mapped[str | None] = mapped_column(String(45))
     public_ip: Mapped[str | None] = mapped_column(String(45))
     host_key: Mapped[str | None] = mapped_column(Text)
+    # how the controller reaches it (provisioners.remote.ssh.Route), recorded at creation
+    ssh_route: Mapped[dict[str, Any] | None] = mapped_column(JSON)
     verification: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     error: Mapped[str | None] = mapped_column(Text)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)

@@ -90,7 +90,7 @@ def configure_ec2(
     required=True,
     type=click.File("r"),
     help="YAML list of servers (name, address, private_ip, network, cidr, "
-    "private_key, ...); see provisioners/servers/README.md.",
+    "private_key, ...); see provisioners/providers/servers/README.md.",
 )
 @reports_errors
 def configure_servers(inventory_file: TextIO) -> None:

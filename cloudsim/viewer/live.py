@@ -25,8 +25,8 @@ from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Run, RunState, User
 from cloudsim.viewer.service import live_run_for
-from provisioners.ssh import Machine as Target
-from provisioners.ssh import SSHError, SSHExecutor
+from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import SSHError, SSHExecutor
 
 log = logging.getLogger(__name__)
 BUFFER_SECONDS = 10  # of simulated time kept for viewers

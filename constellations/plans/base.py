@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 from constellations.definition import ConstellationKind, MachineDefinition
-from provisioners.operations import MachineTemplates, Operation
-from provisioners.ssh import Machine as Target
-from provisioners.ssh import SSHExecutor
+from provisioners.remote.operations import MachineTemplates, Operation
+from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import SSHExecutor
 
 
 @dataclass(frozen=True)
@@ -24,6 +25,16 @@ class Action:
 
 
 PlanItem = Operation | Action
+
+
+class Need(StrEnum):
+    """Something a plan needs in its PlanContext that the launch job makes for it."""
+
+    # supplied in this order
+    SIMULATOR_WHEELS = "simulator_wheels"  # wheelhouse: drcsim and its dependencies
+    CLOUDSIM_BUNDLE = "cloudsim_bundle"  # app_bundle and the admin password in secrets
+    VPN = "vpn"  # vpn: the constellation's PKI for the router's VPN server
+    ROUTER_WHEELS = "router_wheels"  # router_wheelhouse: csrouter and its dependencies
 
 
 @dataclass(frozen=True)

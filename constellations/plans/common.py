@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from constellations.plans.base import PlanContext, PlanItem
-from provisioners.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule
-from provisioners.operations import (
+from provisioners.remote.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule
+from provisioners.remote.operations import (
     deb_packages,
     default_route,
     file,

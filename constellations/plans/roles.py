@@ -8,9 +8,9 @@ from constellations.plans.software import (
     install_wheelhouse,
     wait_for_port,
 )
-from provisioners.operations import directory, file, service
-from provisioners.ssh import Machine as Target
-from provisioners.ssh import SSHExecutor
+from provisioners.remote.operations import directory, file, service
+from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import SSHExecutor
 
 SIMULATOR_VENV = "/opt/drcsim"
 CLIENT_ONLY = ("drcsim", "pyzmq", "msgpack")

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 from constellations.plans.base import Action, PlanContext, PlanItem, VpnMaterial
 from constellations.plans.software import install_wheelhouse
-from provisioners.operations import (
+from provisioners.remote.operations import (
     apply,
     directory,
     file,
@@ -21,8 +21,8 @@ from provisioners.operations import (
     service,
     sysctl,
 )
-from provisioners.ssh import Machine as Target
-from provisioners.ssh import SSHExecutor
+from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import SSHExecutor
 
 FORWARD_CHAIN = "CLOUDSIM-FWD"
 OCU_CHAIN = "CLOUDSIM-OCU"  # raw and mangle: OCU<->LAN packets to csrouter's queues

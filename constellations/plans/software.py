@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import shlex
@@ -10,15 +11,16 @@ import subprocess
 import tarfile
 import tempfile
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
 from urllib.parse import urlsplit
 from urllib.request import url2pathname
 
 from constellations.plans.base import Action
-from provisioners.ssh import Machine as Target
-from provisioners.ssh import SSHExecutor
+from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import SSHExecutor
 
 SUMS = "SHA256SUMS"
 SOURCE_TARBALL = "cloudsim-source.tar.gz"
@@ -37,11 +39,14 @@ def distribution_source(name: str) -> Path:
     Wheels for the machines are built from it; `make install` installs CloudSim, drcsim and
     cloudsim-router from this checkout, so each has one.
     """
-    try:
-        recorded = metadata.distribution(name).read_text("direct_url.json") or "{}"
-    except metadata.PackageNotFoundError:
-        raise WheelhouseError(f"{name} is not installed") from None
-    url = urlsplit(str(json.loads(recorded).get("url", "")))
+    # A source folder's own *.egg-info (from a build there) may come first on sys.path.
+    found = list(metadata.distributions(name=name))
+    if not found:
+        raise WheelhouseError(f"{name} is not installed")
+    recorded = next(
+        (d.read_text("direct_url.json") for d in found if d.read_text("direct_url.json")), "{}"
+    )
+    url = urlsplit(str(json.loads(recorded or "{}").get("url", "")))
     folder = Path(url2pathname(url.path))
     if url.scheme != "file" or not folder.is_dir():
         raise WheelhouseError(
@@ -73,23 +78,41 @@ def build_wheelhouse(source: Path, cache_dir: Path, python: str) -> Path:
     if (target / SUMS).is_file():
         return target
     cache_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=cache_dir, prefix=".building-") as scratch:
-        result = subprocess.run(
-            [python, "-m", "pip", "wheel", "--quiet", "--wheel-dir", scratch, str(source)],
-            capture_output=True,
-            text=True,
-            check=False,
-        )
-        if result.returncode != 0:
-            raise WheelhouseError(f"pip wheel {source} failed: {result.stderr.strip()[-2000:]}")
-        sums = "".join(
-            f"{_file_sha256(wheel)}  {wheel.name}\n"
-            for wheel in sorted(Path(scratch).glob("*.whl"))
-        )
-        (Path(scratch) / SUMS).write_text(sums)
-        shutil.rmtree(target, ignore_errors=True)
-        Path(scratch).rename(target)
+    with _building(cache_dir, source.name):
+        if (target / SUMS).is_file():  # built by whoever held the lock before us
+            return target
+        with tempfile.TemporaryDirectory(dir=cache_dir, prefix=".building-") as scratch:
+            # setuptools builds inside the folder it is given: build a copy, so launches in
+            # other instances never share a build/ folder and the checkout stays clean
+            copy = Path(scratch) / "source" / source.name
+            shutil.copytree(source, copy, ignore=shutil.ignore_patterns(*_SKIP, "*.egg-info"))
+            wheels = Path(scratch) / "wheels"
+            result = subprocess.run(
+                [python, "-m", "pip", "wheel", "--quiet", "--wheel-dir", str(wheels), str(copy)],
+                capture_output=True,
+                text=True,
+                check=False,
+            )
+            if result.returncode != 0:
+                raise WheelhouseError(f"pip wheel {source} failed: {result.stderr.strip()[-2000:]}")
+            sums = "".join(
+                f"{_file_sha256(wheel)}  {wheel.name}\n" for wheel in sorted(wheels.glob("*.whl"))
+            )
+            (wheels / SUMS).write_text(sums)
+            shutil.rmtree(target, ignore_errors=True)
+            wheels.rename(target)
     return target
+
+
+@contextmanager
+def _building(cache_dir: Path, name: str) -> Iterator[None]:
+    """Hold a lock per wheelhouse name, so that launches at once build it only once."""
+    with open(cache_dir / f".{name}.lock", "a") as lock_file:
+        fcntl.flock(lock_file, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock_file, fcntl.LOCK_UN)
 
 
 def _file_sha256(path: Path) -> str:
@@ -201,32 +224,40 @@ def build_source_bundle(
     if (target / SUMS).is_file():
         return target
     cache_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=cache_dir, prefix=".building-") as scratch:
-        with tarfile.open(Path(scratch) / SOURCE_TARBALL, "w:gz") as tar:
-            for name in names:
-                if (root / name).is_file():
-                    tar.add(root / name, arcname=name)
-        for argv in (
-            ["wheel", "--wheel-dir", scratch, *(str(root / folder) for folder in editables)],
-            ["download", "--no-deps", "--dest", scratch, "setuptools>=68", "wheel"],
-        ):
-            result = subprocess.run(
-                [python, "-m", "pip", *argv, "--quiet"],
-                capture_output=True,
-                text=True,
-                check=False,
-            )
-            if result.returncode != 0:
-                raise WheelhouseError(f"pip {argv[0]} failed: {result.stderr.strip()[-2000:]}")
-        built = {_distribution(wheel.name): wheel for wheel in Path(scratch).glob("*.whl")}
-        for folder in editables:
-            # installed from the source, in editable mode: their own wheels are not needed
-            built[_project_name(root / folder)].unlink()
-        (Path(scratch) / EDITABLES).write_text("".join(f"{folder}\n" for folder in editables))
-        sums = "".join(f"{_file_sha256(p)}  {p.name}\n" for p in sorted(Path(scratch).iterdir()))
-        (Path(scratch) / SUMS).write_text(sums)
-        shutil.rmtree(target, ignore_errors=True)
-        Path(scratch).rename(target)
+    with _building(cache_dir, "cloudsim"):
+        if (target / SUMS).is_file():  # built by whoever held the lock before us
+            return target
+        with tempfile.TemporaryDirectory(dir=cache_dir, prefix=".building-") as scratch:
+            bundle, source = Path(scratch) / "bundle", Path(scratch) / "source"
+            bundle.mkdir()
+            with tarfile.open(bundle / SOURCE_TARBALL, "w:gz") as tar:
+                for name in names:
+                    if (root / name).is_file():
+                        tar.add(root / name, arcname=name)
+            # the wheels are built from the tracked files, not in the checkout (see above)
+            with tarfile.open(bundle / SOURCE_TARBALL) as tar:
+                tar.extractall(source, filter="data")
+            for argv in (
+                ["wheel", "--wheel-dir", str(bundle), *(str(source / f) for f in editables)],
+                ["download", "--no-deps", "--dest", str(bundle), "setuptools>=68", "wheel"],
+            ):
+                result = subprocess.run(
+                    [python, "-m", "pip", *argv, "--quiet"],
+                    capture_output=True,
+                    text=True,
+                    check=False,
+                )
+                if result.returncode != 0:
+                    raise WheelhouseError(f"pip {argv[0]} failed: {result.stderr.strip()[-2000:]}")
+            built = {_distribution(wheel.name): wheel for wheel in bundle.glob("*.whl")}
+            for folder in editables:
+                # installed from the source, in editable mode: their own wheels are not needed
+                built[_project_name(source / folder)].unlink()
+            (bundle / EDITABLES).write_text("".join(f"{folder}\n" for folder in editables))
+            sums = "".join(f"{_file_sha256(p)}  {p.name}\n" for p in sorted(bundle.iterdir()))
+            (bundle / SUMS).write_text(sums)
+            shutil.rmtree(target, ignore_errors=True)
+            bundle.rename(target)
     return target
 
 

@@ -9,11 +9,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import requests
 
 from tests.support.servers import free_port, wait_for
-
-PROJECT = Path(__file__).resolve().parents[2]
 
 
 def _children(pid: int) -> list[int]:
@@ -29,12 +28,12 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
-def _start(env: dict[str, str], log: Path) -> subprocess.Popen[bytes]:
+def _start(env: dict[str, str], log: Path, root: Path) -> subprocess.Popen[bytes]:
     with log.open("wb") as out:
         return subprocess.Popen(
             [sys.executable, "-m", "cloudsim.cli", "up"],
             env=env,
-            cwd=PROJECT,
+            cwd=root,
             stdout=out,
             stderr=subprocess.STDOUT,
         )
@@ -47,7 +46,9 @@ def _stop(process: subprocess.Popen[bytes]) -> list[int]:
     return children
 
 
-def test_up_serves_runs_jobs_and_stops_everything(tmp_path: Path) -> None:
+def test_up_serves_runs_jobs_and_stops_everything(
+    tmp_path: Path, pytestconfig: pytest.Config
+) -> None:
     web, redis_port = free_port(), free_port()
     env = dict(
         os.environ,
@@ -62,7 +63,7 @@ def test_up_serves_runs_jobs_and_stops_everything(tmp_path: Path) -> None:
     env.pop("CLOUDSIM_REDIS_URL", None)
     env.pop("CLOUDSIM_ADMIN_PASSWORD", None)
     log = tmp_path / "up.log"
-    process = _start(env, log)
+    process = _start(env, log, pytestconfig.rootpath)
     try:
         wait_for(lambda: "CloudSim is running at" in log.read_text(), 90, "cloudsim up")
         output = log.read_text()
@@ -95,7 +96,9 @@ def test_up_serves_runs_jobs_and_stops_everything(tmp_path: Path) -> None:
     assert not [pid for pid in children if _alive(pid)]
     assert "password (shown once)" not in log.read_text().split("CloudSim is running")[-1]
 
-    again = _start(env, tmp_path / "again.log")  # a second start: same data, no new admin
+    again = _start(
+        env, tmp_path / "again.log", pytestconfig.rootpath
+    )  # a second start: same data, no new admin
     try:
         wait_for(
             lambda: "CloudSim is running at" in (tmp_path / "again.log").read_text(),

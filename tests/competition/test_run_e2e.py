@@ -84,6 +84,7 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     live_url: str,
     browser: Browser,
     tmp_path: Path,
+    pytestconfig: pytest.Config,
     kind: str,
     team_machine: str,
     ending: str,
@@ -116,7 +117,7 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     expect(page.get_by_text("Scheduled Walking, short for 1 team(s).")).to_be_visible()
 
     # the simulator keeps running when the worker that started it dies
-    process = worker_process(constellations_config)
+    process = worker_process(constellations_config, pytestconfig.rootpath)
     try:
         page = browser.new_context().new_page()
         _log_in(page, live_url, user_a)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from constellations.definition import load_kind
 from constellations.plans import PLANS, PlanContext, firewall
-from provisioners.facts.files import PathState
-from provisioners.operations import Operation
+from provisioners.remote.facts.files import PathState
+from provisioners.remote.operations import Operation
 
 SUBNET = "10.211.9.0/24"
 

@@ -20,8 +20,6 @@ from tests.support import job_kinds
 from tests.support.servers import wait_for
 from tests.support.workers import kill_worker, worker_process
 
-PROJECT = Path(__file__).resolve().parents[2]
-
 
 @pytest.fixture
 def markers(tmp_path: Path) -> Path:
@@ -147,11 +145,11 @@ def test_job_page_follows_progress_and_log(
 
 
 def test_killing_the_worker_mid_job_loses_nothing(
-    make_config: Callable[..., Config], markers: Path
+    make_config: Callable[..., Config], markers: Path, pytestconfig: pytest.Config
 ) -> None:
     config = make_config(job_lease_seconds=2)
     with running_app(config) as app:
-        process = worker_process(config)
+        process = worker_process(config, pytestconfig.rootpath)
         try:
             job = enqueue(
                 "test.slow", None, params={"marker_dir": str(markers), "steps": 6, "seconds": 0.4}

@@ -32,9 +32,10 @@ def test_cloudsim_kind_serves_its_own_cloudsim(
     password = re.search(r"password: (\S+)", admin).group(1)  # type: ignore[union-attr]
     assert password not in done.log  # the job log masks it
     # "The internet" (the local public network) fetches the team CloudSim's login page.
-    probe = open_provider("local", constellations_config).public_probe
-    assert probe is not None
-    answer = _http_get(probe(server.public_ip, 5000), "/login")
+    probe = open_provider("local", constellations_config).driver.ex_public_proxy_command
+    argv = probe(server.public_ip, 5000)
+    assert argv is not None
+    answer = _http_get(argv, "/login")
     assert answer.startswith(b"HTTP/1.0 200") and b"Log in" in answer
     finished(service.terminate(None, constellation.id).id)
     assert leftovers(constellations_config) == {"netns": [], "mounts": [], "files": []}

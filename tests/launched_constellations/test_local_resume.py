@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
+import pytest
 from celery.contrib.testing.worker import start_worker
 from flask import Flask
 
@@ -18,13 +18,11 @@ from tests.launched_constellations.conftest import finished, leftovers
 from tests.support.servers import wait_for
 from tests.support.workers import kill_worker, worker_process
 
-PROJECT = Path(__file__).resolve().parents[2]
-
 
 def test_launch_resumes_after_the_worker_is_killed_mid_machines(
-    constellations_app: Flask, constellations_config: Config
+    constellations_app: Flask, constellations_config: Config, pytestconfig: pytest.Config
 ) -> None:
-    process = worker_process(constellations_config)
+    process = worker_process(constellations_config, pytestconfig.rootpath)
     try:
         constellation, job = service.launch(None, name="resume", kind="vrc", provider="local")
 

@@ -17,8 +17,8 @@ from cloudsim.launched_constellations.keys import generate_keypair
 from cloudsim.models import JobState, Role, User
 from cloudsim.people.service import create_team, update_user
 from cloudsim.providers.service import open_provider
-from provisioners.ssh import InMemoryHostKeyStore, SSHExecutor
-from provisioners.ssh import Machine as Target
+from provisioners.remote.ssh import HostKeys, SSHExecutor
+from provisioners.remote.ssh import Machine as Target
 from tests.conftest import make_user, token_for
 from tests.launched_constellations.conftest import finished
 from tests.support.servers import wait_for
@@ -43,7 +43,7 @@ def _ocu(config: Config) -> tuple[SSHExecutor, Target]:
         private_key=keys.private,
         proxy_command=node.extra["ssh_proxy_command"],
     )
-    return SSHExecutor(InMemoryHostKeyStore()), target
+    return SSHExecutor(HostKeys()), target
 
 
 def _download(app: Flask, user: User, constellation_id: int) -> str:

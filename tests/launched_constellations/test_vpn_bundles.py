@@ -22,7 +22,7 @@ from cloudsim.models import (
     User,
 )
 from cloudsim.people.service import delete_user
-from provisioners import pki
+from provisioners.remote import pki
 from tests.conftest import make_user, token_for
 
 

@@ -13,7 +13,7 @@ from cloudsim.extensions import db
 from cloudsim.launched_constellations import vpn
 from cloudsim.models import AuditEvent, Constellation, ConstellationState, Job, Machine, Role, User
 from cloudsim.people.service import delete_user, update_user
-from provisioners import pki
+from provisioners.remote import pki
 from tests.conftest import csrf_token, log_in, make_user, token_for
 
 

@@ -26,11 +26,11 @@ from constellations.plans import PLANS, PlanContext, PlanItem, firewall
 from constellations.plans.base import Action, VpnMaterial
 from constellations.plans.router import VPN_SERVER_NAME, router
 from constellations.plans.software import build_wheelhouse, distribution_source
-from provisioners import pki
-from provisioners.local.driver import LocalNodeDriver
-from provisioners.operations import MachineTemplates, apply
-from provisioners.ssh import CommandResult, ConnectPolicy, InMemoryHostKeyStore, SSHExecutor
-from provisioners.ssh import Machine as Target
+from provisioners.providers.local.driver import LocalNodeDriver
+from provisioners.remote import pki
+from provisioners.remote.operations import MachineTemplates, apply
+from provisioners.remote.ssh import CommandResult, ConnectPolicy, HostKeys, SSHExecutor
+from provisioners.remote.ssh import Machine as Target
 
 PREFIX = f"crt{os.getpid() % 100000}"
 SUBNET_POOL = "10.215.0.0/16"
@@ -203,7 +203,7 @@ def lab() -> Iterator[RouterLab]:
         subnet_pool=SUBNET_POOL,
         public_cidr=PUBLIC_CIDR,
     )
-    executor = SSHExecutor(InMemoryHostKeyStore(), connect_policy=ConnectPolicy(deadline=60))
+    executor = SSHExecutor(HostKeys(), connect_policy=ConnectPolicy(deadline=60))
     try:
         yield _build_lab(driver, executor, scratch)
     finally:

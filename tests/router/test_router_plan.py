@@ -12,8 +12,8 @@ from constellations.definition import load_kind
 from constellations.plans import PLANS, PlanContext
 from constellations.plans.base import Action, VpnMaterial
 from constellations.plans.router import queue_rules, router
-from provisioners import pki
-from provisioners.operations import MachineTemplates, Operation
+from provisioners.remote import pki
+from provisioners.remote.operations import MachineTemplates, Operation
 
 SUBNET = "10.215.7.0/24"
 

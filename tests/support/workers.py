@@ -10,11 +10,12 @@ from pathlib import Path
 
 from cloudsim.config import Config
 
-PROJECT = Path(__file__).resolve().parents[2]
 
+def worker_process(config: Config, root: Path) -> subprocess.Popen[bytes]:
+    """Start a prefork worker (one pool process) on the config's database and Redis.
 
-def worker_process(config: Config) -> subprocess.Popen[bytes]:
-    """Start a prefork worker (one pool process) on the config's database and Redis."""
+    root is the project's folder (pytest's rootpath), where `tests.support` is imported from.
+    """
     env = dict(
         os.environ,
         CLOUDSIM_INSTANCE_DIR=str(config.instance_dir),
@@ -26,7 +27,7 @@ def worker_process(config: Config) -> subprocess.Popen[bytes]:
         CLOUDSIM_LOCAL_PREFIX=config.local_prefix,
         CLOUDSIM_LOCAL_SUBNET_POOL=config.local_subnet_pool,
         CLOUDSIM_LOCAL_PUBLIC_CIDR=config.local_public_cidr,
-        PYTHONPATH=str(PROJECT),
+        PYTHONPATH=str(root),
     )
     argv = [
         sys.executable,
@@ -47,7 +48,7 @@ def worker_process(config: Config) -> subprocess.Popen[bytes]:
         "--without-gossip",
     ]
     return subprocess.Popen(
-        argv, env=env, cwd=PROJECT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        argv, env=env, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
     )
 
 

@@ -19,15 +19,15 @@ from playwright.sync_api import Browser, expect
 
 from cloudsim.models import RunState, User
 from cloudsim.viewer.live import _Relay, follow_simulator, redis_client
-from provisioners.ssh import ConnectPolicy, InMemoryHostKeyStore, Machine, SSHExecutor
-from tests.provisioners.ssh.conftest import (  # noqa: F401
+from provisioners.remote.ssh import ConnectPolicy, HostKeys, Machine, SSHExecutor
+from tests.provisioners.remote.ssh.conftest import (  # noqa: F401
     client_key,
     make_machine,
     privsep_dir,
     sshd,
     sshd_factory,
 )
-from tests.provisioners.ssh.sshd_server import SshServer
+from tests.provisioners.remote.ssh.sshd_server import SshServer
 from tests.viewer.conftest import store_run, wait_for
 from tests.viewer.test_viewer_browser import ARTIFACTS
 from tests.web.test_browser import live_url, log_in_page, webgl_chromium  # noqa: F401
@@ -73,7 +73,7 @@ def test_an_officer_watches_a_running_simulator_live(
         with (
             app.app_context(),
             SSHExecutor(
-                InMemoryHostKeyStore(),
+                HostKeys(),
                 log_sink=relay.line,
                 connect_policy=ConnectPolicy(deadline=15),
             ) as executor,

@@ -1,0 +1,101 @@
+"""What deploy plans need that the launch job makes for them: wheelhouses, bundles, VPN keys.
+
+Plans declare their needs (constellations.plans.NEEDS); each need has a supplier here that
+returns the PlanContext fields it fills. No plan is named: a new plan with known needs
+changes nothing here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from cloudsim.config import Config
+from cloudsim.jobs.runner import JobContext
+from cloudsim.launched_constellations.keys import instance_admin_password
+from cloudsim.launched_constellations.vpn import server_material
+from cloudsim.models import Constellation
+from constellations.plans import Need, PlanContext, needs_of
+from constellations.plans.software import (
+    build_source_bundle,
+    build_wheelhouse,
+    distribution_source,
+)
+from provisioners.remote.ssh import SSHExecutor
+
+
+@dataclass(frozen=True)
+class Supply:
+    """What a supplier may use: the job (log, masks), the executor (masks), the app's settings."""
+
+    ctx: JobContext
+    executor: SSHExecutor
+    constellation: Constellation
+    config: Config
+
+    def secret(self, value: str) -> str:
+        """Keep value out of the job log and the SSH log; return it."""
+        self.ctx.mask(value)
+        self.executor.add_secret(value)
+        return value
+
+    def wheels(self, distribution: str) -> Path:
+        """Return a wheelhouse of an installed distribution and its dependencies (cached)."""
+        cache = self.config.instance_dir / "wheelhouse"
+        return build_wheelhouse(
+            distribution_source(distribution), cache, self.config.machine_python
+        )
+
+
+def _simulator_wheels(supply: Supply) -> dict[str, Any]:
+    supply.ctx.log("building the simulator's wheelhouse (cached after the first time)")
+    return {"wheelhouse": supply.wheels("drcsim")}
+
+
+def _router_wheels(supply: Supply) -> dict[str, Any]:
+    supply.ctx.log("building the router's wheelhouse (cached after the first time)")
+    return {"router_wheelhouse": supply.wheels("cloudsim-router")}
+
+
+def _vpn(supply: Supply) -> dict[str, Any]:
+    supply.ctx.log("making the team VPN's keys")
+    material = server_material(supply.constellation)
+    supply.secret(material.server_key)
+    return {"vpn": material}
+
+
+def _cloudsim_bundle(supply: Supply) -> dict[str, Any]:
+    supply.ctx.log("bundling CloudSim's source and wheels (cached after the first time)")
+    password = supply.secret(instance_admin_password(supply.constellation))
+    # the machines' packages CloudSim imports come from the same checkout, installed alike
+    members = [distribution_source("drcsim"), distribution_source("cloudsim-router")]
+    bundle = build_source_bundle(
+        distribution_source("cloudsim"),
+        supply.config.instance_dir / "wheelhouse",
+        supply.config.machine_python,
+        members,
+    )
+    return {"app_bundle": bundle, "secrets": {"cloudsim_admin_password": password}}
+
+
+SUPPLIERS: dict[Need, Callable[[Supply], dict[str, Any]]] = {
+    Need.SIMULATOR_WHEELS: _simulator_wheels,
+    Need.ROUTER_WHEELS: _router_wheels,
+    Need.VPN: _vpn,
+    Need.CLOUDSIM_BUNDLE: _cloudsim_bundle,
+}
+
+
+def supply_needs(supply: Supply, contexts: dict[str, PlanContext]) -> dict[str, PlanContext]:
+    """Return the plan contexts with what each machine's plans need filled in."""
+    wanted = {name: needs_of(c.machine.plan) for name, c in contexts.items()}
+    everything = frozenset().union(*wanted.values())
+    for need in (need for need in Need if need in everything):
+        fields = SUPPLIERS[need](supply)
+        contexts = {
+            name: replace(c, **fields) if need in wanted[name] else c
+            for name, c in contexts.items()
+        }
+    return contexts

@@ -1,0 +1,37 @@
+"""Reach machines over SSH: run commands, move files, many machines at once."""
+
+from provisioners.remote.ssh.connections import ConnectPolicy
+from provisioners.remote.ssh.errors import (
+    CommandFailed,
+    CommandTimeout,
+    ConnectError,
+    GroupError,
+    HostKeyMismatch,
+    SSHError,
+)
+from provisioners.remote.ssh.executor import SSHExecutor
+from provisioners.remote.ssh.hostkeys import HostKeys, HostKeyStore, fingerprint
+from provisioners.remote.ssh.machine import Machine, Route, load_private_key
+from provisioners.remote.ssh.output import LogSink, SecretMasker
+from provisioners.remote.ssh.result import CommandResult, Transfer
+
+__all__ = [
+    "CommandFailed",
+    "CommandResult",
+    "CommandTimeout",
+    "ConnectError",
+    "ConnectPolicy",
+    "GroupError",
+    "HostKeyMismatch",
+    "HostKeyStore",
+    "HostKeys",
+    "LogSink",
+    "Machine",
+    "Route",
+    "SSHError",
+    "SSHExecutor",
+    "SecretMasker",
+    "Transfer",
+    "fingerprint",
+    "load_private_key",
+]
