@@ -74,7 +74,15 @@ class PreviewAxis:
         """Advance 10 ms given the ZMP reference from now on; return the COM position."""
         zmp = self.c[0] - self.com_height / GRAVITY * self.c[2]
         self.error += zmp - future_zmp[0]
-        u = -self.gi * self.error - float(self.gx @ self.c) - float(self.gd @ future_zmp)
+        # Relative to the current reference: with a finite preview the gains' sum is not
+        # exactly zero, and absolute coordinates would bias the COM by metres walked.
+        origin = float(future_zmp[0])
+        relative = self.c - np.array([origin, 0.0, 0.0])
+        u = (
+            -self.gi * self.error
+            - float(self.gx @ relative)
+            - float(self.gd @ (future_zmp - origin))
+        )
         self.c = self.a @ self.c + self.b * u
         return float(self.c[0])
 

@@ -57,7 +57,7 @@ POSITION_TOLERANCE = 0.05
 YAW_TOLERANCE = 0.08
 MAX_REPLANS = 3  # plans without progress before the walk gives up
 SWING_FROM_ACTUAL = 0.5  # share of the pelvis's tracking error the swing foot allows for
-PLAN_STEPS = 6  # steps planned at a time: then both feet down and a fresh plan
+PLAN_STEPS = 8  # steps planned at a time: then both feet down and a fresh plan
 
 
 class Walker:
