@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from datetime import timedelta
 
 from celery import shared_task
+from csrouter.bandwidth_log import read_bandwidth_log
 from csrouter.protocol import payload_bits_used
 from drcsim.rundir import FINAL, SCORE, read_score_log, serve_argv
 from flask import current_app
@@ -27,7 +28,6 @@ from cloudsim.competition.artifacts import (
     run_dir,
     snapshot_bandwidth_log,
 )
-from cloudsim.competition.plots import read_bandwidth_log
 from cloudsim.competition.runs import request_stop
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError, NotFound

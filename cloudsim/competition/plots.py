@@ -6,59 +6,14 @@ have no internet.
 
 from __future__ import annotations
 
-import json
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
-from datetime import datetime
+from collections.abc import Sequence
+from dataclasses import dataclass
 
+from csrouter.bandwidth_log import DIRECTIONS, Bandwidth
 from markupsafe import Markup, escape
 
-DIRECTIONS = ("uplink", "downlink")
 AVERAGES = (2, 10)
 COLOURS = ("#1f6feb", "#d29922", "#2da44e", "#cf222e")
-
-
-@dataclass
-class Bandwidth:
-    """Bits per second of one direction, second by second from the run's arm, and its totals."""
-
-    bits_per_second: list[int] = field(default_factory=list)
-    used_bits: int = 0
-    cap_bits: int | None = None
-    remaining_bits: int | None = None
-
-
-def read_bandwidth_log(lines: Iterable[str]) -> dict[str, Bandwidth]:
-    """Return each direction's per-second bits from the router's bandwidth log (JSON lines)."""
-    result = {d: Bandwidth() for d in DIRECTIONS}
-    start: datetime | None = None
-    for line in lines:
-        if not line.strip():
-            continue
-        try:
-            record = json.loads(line)
-        except ValueError:
-            continue  # a torn last line of a log copied while the router wrote it
-        if record.get("event") == "armed":
-            start = datetime.fromisoformat(record["time"])
-            for direction in DIRECTIONS:
-                result[direction].cap_bits = (record.get("caps_bits") or {}).get(direction)
-            continue
-        direction = record.get("direction")
-        if direction not in result or "bytes" not in record:
-            continue
-        if "second" in record:  # line N covers N-1..N s after the arm
-            second = max(0, int(record["second"]) - 1)
-        else:
-            moment = datetime.fromisoformat(record["time"])
-            start = start or moment
-            second = max(0, round((moment - start).total_seconds()) - 1)
-        series = result[direction]
-        series.bits_per_second.extend([0] * (second + 1 - len(series.bits_per_second)))
-        series.bits_per_second[second] += 8 * int(record["bytes"])
-        series.used_bits = 8 * int(record.get("cumulative_bytes", 0))
-        series.remaining_bits = record.get("cap_remaining_bits")
-    return result
 
 
 def moving_average(values: Sequence[float], window: int) -> list[float]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
+from csrouter.bandwidth_log import read_bandwidth_log
 from flask import (
     Blueprint,
     current_app,
@@ -23,7 +24,7 @@ from cloudsim.competition import runs as run_service
 from cloudsim.competition import schedule, season
 from cloudsim.competition.artifacts import LogStore
 from cloudsim.competition.forms import ImportForm, ScheduleForm
-from cloudsim.competition.plots import bandwidth_charts, read_bandwidth_log, score_chart
+from cloudsim.competition.plots import bandwidth_charts, score_chart
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.models import Role, Run, User

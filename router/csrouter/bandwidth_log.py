@@ -1,12 +1,22 @@
-"""The bandwidth log: JSON lines, one a second per direction while a run is armed."""
+"""The bandwidth log: JSON lines, one a second per direction while a run is armed.
+
+The writer (the daemon) and the reader (the orchestrator, for a run's figures and plots) are
+both here, so the format has one owner.
+"""
 
 from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterable
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import IO, Any
+
+UPLINK = "uplink"  # OCU -> LAN
+DOWNLINK = "downlink"  # LAN -> OCU
+DIRECTIONS = (UPLINK, DOWNLINK)
 
 
 def utc_iso(epoch: float) -> str:
@@ -48,3 +58,46 @@ class BandwidthLog:
     def _open(self) -> None:
         descriptor = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o640)
         self._handle = os.fdopen(descriptor, "a", buffering=1 << 16)
+
+
+@dataclass
+class Bandwidth:
+    """Bits per second of one direction, second by second from the run's arm, and its totals."""
+
+    bits_per_second: list[int] = field(default_factory=list)
+    used_bits: int = 0
+    cap_bits: int | None = None
+    remaining_bits: int | None = None
+
+
+def read_bandwidth_log(lines: Iterable[str]) -> dict[str, Bandwidth]:
+    """Return each direction's per-second bits from the router's bandwidth log (JSON lines)."""
+    result = {d: Bandwidth() for d in DIRECTIONS}
+    start: datetime | None = None
+    for line in lines:
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+        except ValueError:
+            continue  # a torn last line of a log copied while the router wrote it
+        if record.get("event") == "armed":
+            start = datetime.fromisoformat(record["time"])
+            for direction in DIRECTIONS:
+                result[direction].cap_bits = (record.get("caps_bits") or {}).get(direction)
+            continue
+        direction = record.get("direction")
+        if direction not in result or "bytes" not in record:
+            continue
+        if "second" in record:  # line N covers N-1..N s after the arm
+            second = max(0, int(record["second"]) - 1)
+        else:
+            moment = datetime.fromisoformat(record["time"])
+            start = start or moment
+            second = max(0, round((moment - start).total_seconds()) - 1)
+        series = result[direction]
+        series.bits_per_second.extend([0] * (second + 1 - len(series.bits_per_second)))
+        series.bits_per_second[second] += 8 * int(record["bytes"])
+        series.used_bits = 8 * int(record.get("cumulative_bytes", 0))
+        series.remaining_bits = record.get("cap_remaining_bits")
+    return result

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from csrouter.bandwidth_log import DIRECTIONS
 from csrouter.config import DEFAULT_BANDWIDTH_LOG, MAX_LATENCY_MS
-from csrouter.run import DIRECTIONS
 
 # Commands of the csrouter CLI that drive a run; the daemon's control socket takes the same ops.
 ARM, DISARM, COUNTERS, STATUS = "arm", "disarm", "counters", "status"

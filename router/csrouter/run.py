@@ -8,13 +8,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from csrouter.bandwidth_log import utc_iso
+from csrouter.bandwidth_log import DIRECTIONS, DOWNLINK, UPLINK, utc_iso
 from csrouter.config import check_cap, check_latency
 from csrouter.meter import DirectionMeter
-
-UPLINK = "uplink"  # OCU -> LAN
-DOWNLINK = "downlink"  # LAN -> OCU
-DIRECTIONS = (UPLINK, DOWNLINK)
 
 
 @dataclass

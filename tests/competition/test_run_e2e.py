@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 from celery.contrib.testing.worker import start_worker
+from csrouter.bandwidth_log import read_bandwidth_log
 from flask import Flask
 from playwright.sync_api import Browser, Page, expect, sync_playwright
 from werkzeug.serving import make_server
@@ -25,7 +26,6 @@ from cloudsim.competition.artifacts import (
     run_dir,
 )
 from cloudsim.competition.jobs import ROUTER_FAULT, machines, supervise_runs
-from cloudsim.competition.plots import read_bandwidth_log
 from cloudsim.competition.schedule import in_zone
 from cloudsim.config import Config
 from cloudsim.extensions import db

@@ -1,16 +1,16 @@
-"""The VRC ranking, and the data behind the plots (drcsim tests its score log reader)."""
+"""The VRC ranking, and the plots from csrouter's bandwidth log (drcsim tests its score log)."""
 
 from __future__ import annotations
 
 import json
 
 import pytest
+from csrouter.bandwidth_log import read_bandwidth_log
 
 from cloudsim.competition.plots import (
     bandwidth_charts,
     cumulative,
     moving_average,
-    read_bandwidth_log,
     score_chart,
 )
 from cloudsim.competition.scoring import RunResult, rank
