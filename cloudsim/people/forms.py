@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from flask_wtf import FlaskForm
 from wtforms import BooleanField, PasswordField, SelectChoice, SelectField, StringField
-from wtforms.validators import DataRequired, Length, Optional
+from wtforms.validators import DataRequired, InputRequired, Length, Optional
 
 from cloudsim.models import Role, Team
 
@@ -20,7 +20,9 @@ class TeamForm(FlaskForm):
 class UserForm(FlaskForm):
     """Create or edit a user; officers only see the `user` role."""
 
-    email = StringField("E-mail", validators=[DataRequired(), Length(max=254)])
+    # InputRequired: a submission without the (hidden, when editing) e-mail is no form of ours;
+    # otherwise an empty POST would save the user with "active" unticked.
+    email = StringField("E-mail", validators=[InputRequired(), Length(max=254)])
     name = StringField("Name", validators=[Optional(), Length(max=120)])
     role = SelectField("Role", choices=[SelectChoice(r.value) for r in Role])
     team = SelectField("Team", choices=[])
