@@ -15,7 +15,7 @@ import pytest
 from celery.contrib.testing.worker import start_worker
 from csrouter.bandwidth_log import read_bandwidth_log
 from flask import Flask
-from playwright.sync_api import Browser, Page, expect, sync_playwright
+from playwright.sync_api import Browser, expect
 from werkzeug.serving import make_server
 
 from cloudsim.competition.artifacts import (
@@ -32,11 +32,12 @@ from cloudsim.extensions import db
 from cloudsim.launched_constellations import service as constellations
 from cloudsim.models import JobState, Role, Run, RunState, Team, User, utcnow
 from cloudsim.people import service as people_service
-from tests.conftest import PASSWORD, make_user, token_for
+from tests.conftest import make_user, token_for
 from tests.launched_constellations.conftest import finished
 from tests.support.servers import wait_for
 from tests.support.workers import kill_worker, worker_process
-from tests.web.test_browser import CHROMIUM, CHROMIUM_ARGS
+from tests.viewer.conftest import wait_for as wait_in_page
+from tests.web.test_browser import log_in_page, webgl_chromium
 
 pytestmark = [pytest.mark.hosts, pytest.mark.browser]
 ZONE = "Europe/Berlin"
@@ -55,17 +56,8 @@ def live_url(constellations_app: Flask) -> Iterator[str]:
 
 @pytest.fixture
 def browser() -> Iterator[Browser]:
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+    with webgl_chromium() as browser:  # WebGL: an officer watches the run in 3D
         yield browser
-        browser.close()
-
-
-def _log_in(page: Page, base: str, user: User) -> None:
-    page.goto(f"{base}/login")
-    page.get_by_label("E-mail").fill(user.email)
-    page.get_by_label("Password").fill(PASSWORD)
-    page.get_by_role("button", name="Log in").click()
 
 
 def _local(minutes: int) -> str:
@@ -103,7 +95,7 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
         assert done.state == JobState.SUCCEEDED, f"{done.error}\n{done.log[:6000]}"
 
     page = browser.new_context().new_page()
-    _log_in(page, live_url, officer)
+    log_in_page(page, live_url, officer)
     page.goto(f"{live_url}/tasks")
     page.get_by_label("Name").fill("Walking, short")
     page.get_by_label("Team", exact=True).select_option(label="Team A")
@@ -120,7 +112,7 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     process = worker_process(constellations_config, pytestconfig.rootpath)
     try:
         page = browser.new_context().new_page()
-        _log_in(page, live_url, user_a)
+        log_in_page(page, live_url, user_a)
         page.goto(f"{live_url}/tasks")
         page.get_by_role("button", name="Start run").click()
         expect(page.locator("#run-state")).not_to_have_text("starting", timeout=120_000)
@@ -152,6 +144,8 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
         return check
 
     with start_worker(celery, pool="threads", concurrency=2, perform_ping_check=False):
+        if kind == "vrc":
+            _watch_live(browser, live_url, officer, user_a, run)
         if ending == "stopped":
             wait_for(beat(lambda r: r.score >= 1), 120, "the first checkpoint")
             page.goto(f"{live_url}/runs/{run.id}")
@@ -220,6 +214,26 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     expect(page.get_by_role("link", name="score.jsonl")).to_be_visible()
     page.goto(f"{live_url}/leaderboard")
     expect(page.locator("tr[data-team='Team A'] .checkpoints")).to_have_text(str(run.score))
+
+
+def _watch_live(browser: Browser, base: str, officer: User, user_a: User, run: Run) -> None:
+    """An officer watches the running run in 3D, relayed through CloudSim; its team may not."""
+    page = browser.new_context().new_page()
+    log_in_page(page, base, officer)
+    page.goto(f"{base}/runs/{run.id}/view")
+    wait_in_page(page, "window.cloudsimViewer && cloudsimViewer.ready", 60_000)
+    wait_in_page(page, "cloudsimViewer.step !== null", 60_000)  # frames arrive
+    first = page.evaluate("cloudsimViewer.t")
+    wait_in_page(page, f"cloudsimViewer.t > {first} + 1")  # and move on
+    robot = page.evaluate("cloudsimViewer.robotId()")
+    x, y, z = page.evaluate(f"cloudsimViewer.linkPosition({robot}, 0)")
+    assert 0.5 < z < 1.2, (x, y, z)  # the pelvis, drawn where a walking robot has it
+    page.context.close()
+    team = browser.new_context().new_page()
+    log_in_page(team, base, user_a)
+    answer = team.goto(f"{base}/runs/{run.id}/view")
+    assert answer is not None and answer.status == 403  # fairness: no live view of its own run
+    team.context.close()
 
 
 def _refusals(app: Flask, team_a: Team, user_a: User, user_b: User, run: Run) -> None:
