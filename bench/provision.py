@@ -15,6 +15,7 @@ from pathlib import Path
 from celery.contrib.testing.worker import start_worker
 
 from cloudsim.app import create_app
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service
@@ -26,6 +27,7 @@ from tests.support.servers import RedisServer
 
 def wait(job_ids: list[str]) -> float:
     """Wait for the jobs; return the seconds until the last one ended (fail loudly)."""
+    db.session.commit()  # the caller's boundary: the commit sends the jobs
     started = time.perf_counter()
     while True:
         db.session.expire_all()
@@ -70,18 +72,19 @@ def main() -> None:
                 loglevel="WARNING",
                 shutdown_timeout=60,
             ):
-                _, job = service.launch(None, name="bench-one", kind="vrc", provider="local")
+                _, job = service.launch(SYSTEM, name="bench-one", kind="vrc", provider="local")
                 one = wait([job.id])
                 names = [f"bench-{n}" for n in ("a", "b", "c")]
                 jobs = [
-                    service.launch(None, name=n, kind="vrc", provider="local")[1].id for n in names
+                    service.launch(SYSTEM, name=n, kind="vrc", provider="local")[1].id
+                    for n in names
                 ]
                 three = wait(jobs)
                 spans = [db.session.get(Job, job_id) for job_id in jobs]
                 overlap = min(j.finished_at for j in spans) - max(j.started_at for j in spans)  # type: ignore[union-attr,type-var]
                 started = time.perf_counter()
-                terminate_one = wait([service.terminate(None, "bench-one").id])
-                terminate_three = wait([service.terminate(None, n).id for n in names])
+                terminate_one = wait([service.terminate(SYSTEM, "bench-one").id])
+                terminate_three = wait([service.terminate(SYSTEM, n).id for n in names])
     finally:
         with app.app_context():
             driver = open_provider("local", app.config["CLOUDSIM"]).driver

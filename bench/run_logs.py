@@ -21,6 +21,7 @@ from pathlib import Path
 from celery.contrib.testing.worker import start_worker
 
 from cloudsim.app import create_app
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.competition.artifacts import RUN_LOGS, LogStore, collect_logs, run_dir
 from cloudsim.competition.jobs import machines
 from cloudsim.config import Config
@@ -69,7 +70,7 @@ def _bench(app: object, config: Config, size_mb: int) -> None:
     celery = app.extensions["celery"]  # type: ignore[attr-defined]
     with start_worker(celery, pool="threads", concurrency=2, perform_ping_check=False):
         constellation, job = service.launch(
-            None, name="logs", kind="simple", provider="local", team_id=team.id
+            SYSTEM, name="logs", kind="simple", provider="local", team_id=team.id
         )
         while not job.state.final:
             time.sleep(0.5)

@@ -14,11 +14,12 @@ from typing import Any
 import pytest
 import redis
 from cryptography.fernet import Fernet
-from flask import Flask
+from flask import Flask, has_app_context
 from flask.testing import FlaskClient
 from moto.server import ThreadedMotoServer
 
 from cloudsim.app import create_app
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.auth.tokens import issue_token
 from cloudsim.config import Config
 from cloudsim.extensions import db
@@ -92,6 +93,10 @@ class IsolatedClient(FlaskClient):
     database session), exactly as in production where every request gets its own."""
 
     def open(self, *args: Any, **kwargs: Any) -> Any:
+        # What the test did so far is its own finished transaction (services only flush): a
+        # request, in its own session, must see it, and SQLite must not be left write-locked.
+        if has_app_context():
+            db.session.commit()
         return contextvars.Context().run(super().open, *args, **kwargs)
 
 
@@ -130,19 +135,19 @@ def any_db_app(
 
 @pytest.fixture
 def team_a(app: Flask) -> Team:
-    return service.create_team(None, "Team A")
+    return service.create_team(SYSTEM, "Team A")
 
 
 @pytest.fixture
 def team_b(app: Flask) -> Team:
-    return service.create_team(None, "Team B")
+    return service.create_team(SYSTEM, "Team B")
 
 
 def make_user(role: Role, team: Team | None = None, email: str | None = None) -> User:
     """Create a user with the shared test password."""
     email = email or f"{role.value}{next(_names)}@example.org"
     return service.create_user(
-        None, email=email, role=role, team_id=team.id if team else None, password=PASSWORD
+        SYSTEM, email=email, role=role, team_id=team.id if team else None, password=PASSWORD
     ).user
 
 

@@ -2,28 +2,34 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from flask import has_request_context, request
 from sqlalchemy import Select, select
 
 from cloudsim.extensions import db
+
+if TYPE_CHECKING:
+    from cloudsim.auth.policy import Actor
 from cloudsim.models import AuditEvent, Role, User
 
 
 def record(
     action: str,
-    actor: User | None,
+    actor: Actor | None,
     *,
     target_type: str | None = None,
     target_id: object = None,
     team_id: int | None = None,
     **details: Any,
 ) -> AuditEvent:
-    """Add an audit event to the current transaction (committed with the change it records)."""
+    """Add an audit event to the current transaction (committed with the change it records).
+
+    `actor` is None only for someone not logged in (a failed login).
+    """
     event = AuditEvent(
         actor_id=actor.id if actor else None,
-        actor=actor.email if actor else "system",
+        actor=actor.email if actor else "anonymous",
         action=action,
         target_type=target_type,
         target_id=None if target_id is None else str(target_id),

@@ -16,16 +16,40 @@ from cloudsim.models import Role, User
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-def require_role(actor: User | None, role: Role, action: str) -> None:
-    """Raise Forbidden unless the actor has `role`; None is the system itself (the CLI)."""
-    if actor is not None and not actor.has_role(role):
+class SystemActor:
+    """CloudSim itself acting: the operator at the `cloudsim` command, beat, a job's follow-ups.
+
+    It may do anything an admin may, belongs to no team and has no account; the audit log
+    names it "system".
+    """
+
+    id: int | None = None
+    email = "system"
+    team_id: int | None = None
+    role = Role.ADMIN
+
+    def has_role(self, role: Role) -> bool:
+        """The system has every role."""
+        return True
+
+    def __repr__(self) -> str:
+        return "SYSTEM"
+
+
+SYSTEM = SystemActor()
+Actor = User | SystemActor  # who does something: a person, or CloudSim itself
+
+
+def require_role(actor: Actor, role: Role, action: str) -> None:
+    """Raise Forbidden unless the actor has `role`."""
+    if not actor.has_role(role):
         raise Forbidden(f"only {role.value}s and above may {action}")
 
 
-def require_team_access(actor: User | None, team_id: int | None, kind: str, ref: object) -> None:
+def require_team_access(actor: Actor, team_id: int | None, kind: str, ref: object) -> None:
     """Raise NotFound for another team's `kind` `ref`, worded exactly as for a missing one:
     a user must not learn what exists."""
-    if actor is None or actor.has_role(Role.OFFICER):
+    if actor.has_role(Role.OFFICER):
         return
     if team_id is None or actor.team_id != team_id:
         raise NotFound.of(kind, ref)

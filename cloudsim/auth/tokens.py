@@ -49,7 +49,6 @@ def issue_token(user: User, name: str) -> IssuedToken:
         team_id=user.team_id,
         name=name,
     )
-    db.session.commit()
     return IssuedToken(token, plaintext)
 
 
@@ -61,7 +60,6 @@ def revoke_token(user: User, token_id: int) -> None:
     if token.revoked_at is None:
         token.revoked_at = utcnow()
         record("token.revoke", user, target_type="token", target_id=token.id, team_id=user.team_id)
-        db.session.commit()
 
 
 def revoke_all_tokens(user: User) -> None:
@@ -79,6 +77,5 @@ def user_for_token(plaintext: str) -> User | None:
     token = db.session.scalar(select(ApiToken).where(ApiToken.token_hash == _digest(plaintext)))
     if token is None or token.revoked_at is not None or not token.user.active:
         return None
-    token.last_used_at = utcnow()
-    db.session.commit()
+    token.last_used_at = utcnow()  # committed with the request
     return token.user

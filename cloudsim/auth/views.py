@@ -12,12 +12,12 @@ from sqlalchemy import select
 from cloudsim.audit.service import record
 from cloudsim.auth.forms import ConfirmForm, LoginForm, PasswordForm, TokenForm
 from cloudsim.auth.passwords import verify_password
+from cloudsim.auth.service import change_own_password
 from cloudsim.auth.session import end_session, start_session
 from cloudsim.auth.tokens import issue_token, revoke_token
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db, limiter
 from cloudsim.models import User, utcnow
-from cloudsim.people.service import update_user
 
 bp = Blueprint("auth", __name__)
 
@@ -60,10 +60,8 @@ def login() -> ResponseReturnValue:
             start_session(user)
             user.last_login_at = utcnow()
             record("auth.login", user, target_type="user", target_id=user.id, team_id=user.team_id)
-            db.session.commit()
             return redirect(_safe_next(request.args.get("next")))
         record("auth.login_failed", None, target_type="user", target_id=None, email=email)
-        db.session.commit()
         flash("Wrong e-mail or password.", "error")
         return render_template("auth/login.html", form=form), 401
     status = 400 if request.method == "POST" else 200
@@ -82,7 +80,6 @@ def logout() -> ResponseReturnValue:
             team_id=current_user.team_id,
         )
         end_session()
-        db.session.commit()
         flash("You are logged out.", "info")
     return redirect(url_for("auth.login"))
 
@@ -110,16 +107,9 @@ def change_password() -> ResponseReturnValue:
         else:
             try:
                 # Changing a password ends every session, this one included: log in again.
-                user = update_user(None, current_user.id, password=form.new.data)
-                record(
-                    "auth.password_change",
-                    user,
-                    target_type="user",
-                    target_id=user.id,
-                    team_id=user.team_id,
-                )
+                user = current_user._get_current_object()
+                change_own_password(user, form.new.data)
                 start_session(user)
-                db.session.commit()
                 flash("Password changed; other sessions were logged out.", "info")
                 return redirect(url_for("auth.account"))
             except CloudSimError as exc:

@@ -11,6 +11,7 @@ from typing import Any, TypeVar, cast
 import click
 from flask import Flask
 
+from cloudsim import extensions  # not `db`: that name is the `cloudsim db` submodule
 from cloudsim.config import Config, ConfigError
 from cloudsim.errors import CloudSimError
 
@@ -33,12 +34,22 @@ class AppHolder:
 
 @contextmanager
 def app_context() -> Iterator[Flask]:
-    """Yield the app inside its context."""
+    """Yield the app inside its context; commit what the block changed (the command's boundary)."""
     holder = click.get_current_context().find_object(AppHolder)
     assert holder is not None
     app = holder.get()
     with app.app_context():
-        yield app
+        try:
+            yield app
+        except BaseException:
+            extensions.db.session.rollback()
+            raise
+        extensions.db.session.commit()
+
+
+def commit() -> None:
+    """Commit the command's work now, before it only waits and reads (its jobs start here)."""
+    extensions.db.session.commit()
 
 
 def reports_errors(fn: F) -> F:

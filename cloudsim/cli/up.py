@@ -9,6 +9,7 @@ import click
 from sqlalchemy import select
 
 from cloudsim import migrate
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, reports_errors
 from cloudsim.competition.demo import schedule_demo
 from cloudsim.config import Config
@@ -139,11 +140,11 @@ def _launch_demo(base_url: str) -> None:
             return
         if existing is not None:
             db.session.delete(existing)
-            db.session.commit()
+            db.session.flush()  # its name is free for the new one
         team = db.session.scalar(select(Team).where(Team.name == DEMO_TEAM))
-        team = team or create_team(None, DEMO_TEAM)
+        team = team or create_team(SYSTEM, DEMO_TEAM)
         created, _ = launch(
-            None, name=DEMO_CONSTELLATION, kind="vrc", provider="local", team_id=team.id
+            SYSTEM, name=DEMO_CONSTELLATION, kind="vrc", provider="local", team_id=team.id
         )
         click.echo(
             f"demo: launching a local vrc constellation: {base_url}constellations/{created.id}"

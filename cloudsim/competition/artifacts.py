@@ -203,7 +203,7 @@ def collect_logs(
         artifact.location = name
         artifact.sha256 = checksum
         artifact.size = size
-        db.session.commit()
+        db.session.flush()
         (staging / remote.filename).unlink()
         log(f"{remote.filename}: {size} bytes, sha256 {checksum[:12]} verified and stored")
     return problems

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, emit, reports_errors
 from cloudsim.competition import runs as run_service
 from cloudsim.competition import schedule, season
@@ -98,7 +99,7 @@ def add(
             time_zone=time_zone,
         )
         team_ids = [find_team(t).id for t in teams] if teams else None
-        created = schedule.schedule(None, spec, team_ids)
+        created = schedule.schedule(SYSTEM, spec, team_ids)
         emit(
             [task_data(t) for t in created],
             as_json,
@@ -112,7 +113,7 @@ def add(
 def list_tasks(as_json: bool) -> None:
     """List every task."""
     with app_context():
-        tasks = db.session.scalars(schedule.visible_tasks(None)).all()
+        tasks = db.session.scalars(schedule.visible_tasks(SYSTEM)).all()
         lines = [
             f"{t.id:5} {t.team.name:20} {t.name:30} {t.world}#{t.run_config} "
             f"{t.window_start:%Y-%m-%d %H:%M}-{t.window_stop:%Y-%m-%d %H:%M} UTC"
@@ -127,7 +128,7 @@ def list_tasks(as_json: bool) -> None:
 def delete(task_id: int) -> None:
     """Delete a task nobody has run."""
     with app_context():
-        schedule.delete_task(None, task_id)
+        schedule.delete_task(SYSTEM, task_id)
         click.echo(f"deleted task {task_id}")
 
 
@@ -142,7 +143,7 @@ def schedule_group() -> None:
 def import_command(path: Path) -> None:
     """Schedule every task of a season file (tasks already there are kept)."""
     with app_context():
-        created = season.import_season(None, path.read_text())
+        created = season.import_season(SYSTEM, path.read_text())
         click.echo(f"imported {path}: {len(created)} new task(s)")
 
 
@@ -152,7 +153,7 @@ def import_command(path: Path) -> None:
 def export_command(time_zone: str | None) -> None:
     """Print the season's schedule as YAML."""
     with app_context():
-        click.echo(season.export_season(None, time_zone), nl=False)
+        click.echo(season.export_season(SYSTEM, time_zone), nl=False)
 
 
 @click.group()
@@ -167,7 +168,7 @@ def run() -> None:
 def start(task_id: int, as_json: bool) -> None:
     """Start a run of an open task on its team's constellation."""
     with app_context():
-        started = run_service.start_run(None, task_id)
+        started = run_service.start_run(SYSTEM, task_id)
         emit(run_data(started), as_json, f"run {started.id}: {started.state.value}")
 
 
@@ -177,7 +178,7 @@ def start(task_id: int, as_json: bool) -> None:
 def stop(run_id: int) -> None:
     """Stop a live run."""
     with app_context():
-        stopped = run_service.stop_run(None, run_id)
+        stopped = run_service.stop_run(SYSTEM, run_id)
         click.echo(f"run {stopped.id}: {stopped.state.value}")
 
 
@@ -188,7 +189,7 @@ def stop(run_id: int) -> None:
 def show(run_id: int, as_json: bool) -> None:
     """Show a run: state, score, logs."""
     with app_context():
-        shown = run_service.get_run(None, run_id)
+        shown = run_service.get_run(SYSTEM, run_id)
         emit(
             run_data(shown),
             as_json,
@@ -204,7 +205,7 @@ def show(run_id: int, as_json: bool) -> None:
 def leaderboard(as_json: bool) -> None:
     """Print the ranking of the teams."""
     with app_context():
-        standings = run_service.leaderboard(None)
+        standings = run_service.leaderboard(SYSTEM)
         lines = [
             f"{s.rank:3} {s.team:24} {s.checkpoints:3} checkpoints, "
             f"{100 * s.uplink_share_left:5.1f}% uplink left, {s.seconds_left:.0f} s left"

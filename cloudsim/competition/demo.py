@@ -16,6 +16,7 @@ from datetime import timedelta
 from flask import current_app
 from sqlalchemy import select
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.competition.jobs import DRCSIM, RunError, machines
 from cloudsim.competition.runs import start_run
 from cloudsim.competition.schedule import TaskSpec, schedule
@@ -46,10 +47,10 @@ def schedule_demo(team_id: int, constellation_id: int) -> Job:
             window_stop=now + timedelta(hours=12),
             timeout_s=DEMO_SECONDS,
         )
-        [task] = schedule(None, spec, [team_id])
+        [task] = schedule(SYSTEM, spec, [team_id])
     return enqueue(
         "competition.demo",
-        None,
+        SYSTEM,
         target_type="task",
         target_id=task.id,
         team_id=team_id,
@@ -72,7 +73,8 @@ def run_demo(ctx: JobContext) -> None:
         return
     if run is None or run.state == RunState.ERROR:
         ctx.stage("start", 40)
-        run = start_run(None, task.id, constellation_id)
+        run = start_run(SYSTEM, task.id, constellation_id)
+        ctx.checkpoint()  # the run exists and its start job is sent before this job waits
         ctx.log(f"started run {run.id}")
     run_id = run.id
     _await(ctx, lambda: _state(run_id) != RunState.STARTING, f"run {run_id} to start")

@@ -21,6 +21,7 @@ from drcsim.rundir import FINAL, SCORE, read_score_log, serve_argv
 from flask import current_app
 from sqlalchemy import select
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.competition.artifacts import (
     LogStore,
     artifact_for,
@@ -172,13 +173,12 @@ def start_run_job(ctx: JobContext) -> None:
         run.error = f"starting failed at the {ctx.job.stage} stage: {exc}"
         run.stop_reason = run.stop_reason or "error"
         run.state = RunState.STOPPING
-        db.session.commit()
         ctx.log(f"start failed ({exc}); stopping what was started")
         _enqueue_stop(run)
+        ctx.checkpoint()  # the stopping state and the stop job survive this job's failure
         raise RunError(run.error) from exc
     run.state = RunState.RUNNING
     run.running_at = utcnow()
-    db.session.commit()
     ctx.stage("running", 100)
     if run.stop_reason is not None:  # stopped while it was starting
         request_stop(run, run.stop_reason)
@@ -202,7 +202,7 @@ def _start_simulator(reach: Machines, run: Run) -> None:
 
 
 def _enqueue_stop(run: Run) -> None:
-    enqueue("run.stop", None, target_type="run", target_id=run.id, team_id=run.team_id)
+    enqueue("run.stop", SYSTEM, target_type="run", target_id=run.id, team_id=run.team_id)
 
 
 @job_kind("run.stop")
@@ -213,7 +213,7 @@ def stop_run_job(ctx: JobContext) -> None:
         ctx.log(f"run {run.id} is {run.state.value} already")
         return
     run.state = RunState.STOPPING
-    db.session.commit()
+    ctx.checkpoint()
     config: Config = current_app.config["CLOUDSIM"]
     # A router fault seen during the run is kept on the record; it does not fail the run.
     router_note = run.error if run.error and run.error.startswith(ROUTER_FAULT) else None
@@ -232,7 +232,6 @@ def stop_run_job(ctx: JobContext) -> None:
     run.end_reason = run.end_reason or run.stop_reason
     run.finished_at = utcnow()
     run.active_constellation_id = None
-    db.session.commit()
     ctx.log(f"run {run.id} {run.state.value}: {run.score} checkpoint(s), ended by {run.end_reason}")
 
 
@@ -290,7 +289,7 @@ def score_run(run: Run, store: LogStore) -> None:
         usage = read_bandwidth_log(store.lines(bandwidth.location))
         run.uplink_bits_used = usage["uplink"].used_bits
         run.downlink_bits_used = usage["downlink"].used_bits
-    db.session.commit()
+    db.session.flush()
 
 
 def _end_reason(simulator: str | None, requested: str | None) -> str | None:
@@ -359,7 +358,7 @@ def follow(run: Run, config: Config) -> str | None:
     lines, _, status = output.rpartition("#\n")
     result = read_score_log(lines.splitlines())
     run.score, run.falls, run.sim_seconds = result.score, result.falls, result.sim_seconds
-    db.session.commit()
+    db.session.flush()
     return "ended" if ("final" in status or "inactive" in status) else None
 
 

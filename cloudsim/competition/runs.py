@@ -10,7 +10,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import selectinload
 
 from cloudsim.audit.service import record
-from cloudsim.auth.policy import require_team_access
+from cloudsim.auth.policy import SYSTEM, Actor, require_team_access
 from cloudsim.competition.scoring import RunResult, Standing, rank
 from cloudsim.errors import Conflict, Forbidden, NotFound
 from cloudsim.extensions import db
@@ -24,7 +24,6 @@ from cloudsim.models import (
     RunState,
     Task,
     Team,
-    User,
     utcnow,
 )
 
@@ -33,7 +32,7 @@ RUNNABLE_KINDS = ("vrc", "simple")
 NOT_OPEN = "no task with that id is open for your team now"
 
 
-def start_run(actor: User | None, task_id: int, constellation_id: int | None = None) -> Run:
+def start_run(actor: Actor, task_id: int, constellation_id: int | None = None) -> Run:
     """Start a run of an open task on the team's ready constellation (the team, or officers)."""
     task = db.session.get(Task, task_id)
     is_team_user = actor is not None and not actor.has_role(Role.OFFICER)
@@ -77,7 +76,6 @@ def start_run(actor: User | None, task_id: int, constellation_id: int | None = N
         task=task.name,
         constellation=constellation.name,
     )
-    db.session.commit()
     enqueue("run.start", actor, target_type="run", target_id=run.id, team_id=run.team_id)
     return run
 
@@ -108,7 +106,7 @@ def _constellation_for(task: Task, constellation_id: int | None) -> Constellatio
     return free[0]
 
 
-def stop_run(actor: User | None, run_id: int) -> Run:
+def stop_run(actor: Actor, run_id: int) -> Run:
     """Ask a live run to stop (its team, or officers); safe to repeat."""
     run = get_run(actor, run_id)
     if run.state not in LIVE:
@@ -136,15 +134,14 @@ def request_stop(run: Run, reason: str) -> bool:
         .values(state=RunState.STOPPING)
         .execution_options(synchronize_session=False)
     )
-    db.session.commit()
     db.session.refresh(run)
     if moved.rowcount != 1:  # type: ignore[attr-defined]
         return False
-    enqueue("run.stop", None, target_type="run", target_id=run.id, team_id=run.team_id)
+    enqueue("run.stop", SYSTEM, target_type="run", target_id=run.id, team_id=run.team_id)
     return True
 
 
-def get_run(actor: User | None, run_id: int) -> Run:
+def get_run(actor: Actor, run_id: int) -> Run:
     """Return a run the actor may see."""
     run = db.session.get(Run, run_id)
     if run is None:
@@ -153,7 +150,7 @@ def get_run(actor: User | None, run_id: int) -> Run:
     return run
 
 
-def get_log(actor: User | None, run_id: int, artifact_id: int) -> Artifact:
+def get_log(actor: Actor, run_id: int, artifact_id: int) -> Artifact:
     """Return a stored log of a run the actor may see."""
     run = get_run(actor, run_id)
     artifact = db.session.get(Artifact, artifact_id)
@@ -162,7 +159,7 @@ def get_log(actor: User | None, run_id: int, artifact_id: int) -> Artifact:
     return artifact
 
 
-def visible_runs(actor: User | None) -> Select[Run]:
+def visible_runs(actor: Actor) -> Select[Run]:
     """Return a query for the runs the actor may see, newest first."""
     query = (
         select(Run)
@@ -181,7 +178,7 @@ def live_run(team_id: int) -> Run | None:
     )
 
 
-def leaderboard(actor: User | None) -> list[Standing]:
+def leaderboard(actor: Actor) -> list[Standing]:
     """Return the ranking of every team over their finished runs, as much as the actor may see."""
     policy = current_app.config["CLOUDSIM"].leaderboard_for_users
     team_user = actor is not None and not actor.has_role(Role.OFFICER)

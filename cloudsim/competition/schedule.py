@@ -10,11 +10,11 @@ from sqlalchemy import Select, select
 from sqlalchemy.orm import selectinload
 
 from cloudsim.audit.service import record
-from cloudsim.auth.policy import require_role, require_team_access
+from cloudsim.auth.policy import Actor, require_role, require_team_access
 from cloudsim.competition.worlds import check_world
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.models import Role, Task, Team, User, utcnow
+from cloudsim.models import Role, Task, Team, utcnow
 
 NAME_MAX = 120
 MAX_TIMEOUT_S = 24 * 3600
@@ -131,17 +131,16 @@ def _teams(team_ids: list[int] | None) -> list[Team]:
     return teams
 
 
-def schedule(actor: User | None, spec: TaskSpec, team_ids: list[int] | None) -> list[Task]:
+def schedule(actor: Actor, spec: TaskSpec, team_ids: list[int] | None) -> list[Task]:
     """Create the task for each team (None: every team); officers and admins."""
     require_role(actor, Role.OFFICER, "schedule tasks")
     spec = check_spec(spec)
     tasks = [add_task(actor, spec, team) for team in _teams(team_ids)]
-    db.session.commit()
     return tasks
 
 
-def add_task(actor: User | None, spec: TaskSpec, team: Team) -> Task:
-    """Add one checked task for a team to the session (the caller commits)."""
+def add_task(actor: Actor, spec: TaskSpec, team: Team) -> Task:
+    """Add one checked task for a team to the session."""
     task = Task(team_id=team.id, **spec.__dict__)
     db.session.add(task)
     db.session.flush()
@@ -159,7 +158,7 @@ def add_task(actor: User | None, spec: TaskSpec, team: Team) -> Task:
     return task
 
 
-def delete_task(actor: User | None, task_id: int) -> None:
+def delete_task(actor: Actor, task_id: int) -> None:
     """Remove a task nobody has run yet (officers and admins)."""
     require_role(actor, Role.OFFICER, "delete tasks")
     task = get_task(actor, task_id)
@@ -167,10 +166,10 @@ def delete_task(actor: User | None, task_id: int) -> None:
         raise Conflict(f"task {task.name!r} has runs; it stays for the record")
     record("task.delete", actor, target_type="task", target_id=task.id, team_id=task.team_id)
     db.session.delete(task)
-    db.session.commit()
+    db.session.flush()
 
 
-def get_task(actor: User | None, task_id: int) -> Task:
+def get_task(actor: Actor, task_id: int) -> Task:
     """Return a task the actor may see: a team user sees their team's, once its window opened."""
     task = db.session.get(Task, task_id)
     if task is None:
@@ -181,7 +180,7 @@ def get_task(actor: User | None, task_id: int) -> Task:
     return task
 
 
-def visible_tasks(actor: User | None) -> Select[Task]:
+def visible_tasks(actor: Actor) -> Select[Task]:
     """Return a query for the tasks the actor may see, in schedule order."""
     query = (
         select(Task)
@@ -198,7 +197,7 @@ def visible_tasks(actor: User | None) -> Select[Task]:
     return query
 
 
-def open_tasks(actor: User | None, team_id: int | None = None) -> list[Task]:
+def open_tasks(actor: Actor, team_id: int | None = None) -> list[Task]:
     """Return the tasks whose window is open now (a team user: their team's only)."""
     now = utcnow()
     query = visible_tasks(actor).where(Task.window_start <= now, Task.window_stop > now)
@@ -207,5 +206,5 @@ def open_tasks(actor: User | None, team_id: int | None = None) -> list[Task]:
     return list(db.session.scalars(query))
 
 
-def _sees_everything(actor: User | None) -> bool:
+def _sees_everything(actor: Actor) -> bool:
     return actor is None or actor.has_role(Role.OFFICER)

@@ -26,7 +26,7 @@ import yaml
 from sqlalchemy import select
 
 from cloudsim.audit.service import record
-from cloudsim.auth.policy import require_role
+from cloudsim.auth.policy import Actor, require_role
 from cloudsim.competition.schedule import (
     DEFAULT_DOWNLINK_BITS,
     DEFAULT_LATENCY_MS,
@@ -42,7 +42,7 @@ from cloudsim.competition.schedule import (
 )
 from cloudsim.errors import InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.models import Role, Task, Team, User
+from cloudsim.models import Role, Task, Team
 
 MAX_TASKS = 1000
 TASK_KEYS = {
@@ -150,7 +150,7 @@ def _team_names(value: Any, name: str) -> list[str] | None:
     return value
 
 
-def import_season(actor: User | None, text: str) -> list[Task]:
+def import_season(actor: Actor, text: str) -> list[Task]:
     """Schedule every task of a season document; tasks already scheduled are left alone."""
     require_role(actor, Role.OFFICER, "import schedules")
     entries, _ = parse_season(text)
@@ -179,11 +179,10 @@ def import_season(actor: User | None, text: str) -> list[Task]:
             existing.add(key)
             created.append(add_task(actor, spec, team))
     record("schedule.import", actor, tasks=len(entries), created=len(created))
-    db.session.commit()
     return created
 
 
-def export_season(actor: User | None, zone_name: str | None = None) -> str:
+def export_season(actor: Actor, zone_name: str | None = None) -> str:
     """Write every scheduled task as a season document (the same task for several teams once)."""
     require_role(actor, Role.OFFICER, "export schedules")
     tasks = list(db.session.scalars(visible_tasks(actor)))

@@ -9,6 +9,7 @@ from celery import Celery, Task
 from flask import Flask
 
 from cloudsim.config import Config
+from cloudsim.extensions import db
 
 
 def celery_init_app(app: Flask, config: Config) -> Celery:
@@ -16,8 +17,15 @@ def celery_init_app(app: Flask, config: Config) -> Celery:
 
     class FlaskTask(Task):  # type: ignore[misc]
         def __call__(self, *args: Any, **kwargs: Any) -> Any:
+            # A task is a transaction boundary: it commits once, when it returns.
             with app.app_context():
-                return self.run(*args, **kwargs)
+                try:
+                    result = self.run(*args, **kwargs)
+                except BaseException:
+                    db.session.rollback()
+                    raise
+                db.session.commit()
+                return result
 
     celery = Celery(app.name, task_cls=FlaskTask)
     redis_url = config.effective_redis_url

@@ -10,7 +10,9 @@ from datetime import timedelta
 
 from celery import shared_task
 from flask import current_app
-from sqlalchemy import or_, update
+from sqlalchemy import Update, event, func, or_, update
+from sqlalchemy.orm import ORMExecuteState, Session
+from sqlalchemy.orm.attributes import set_committed_value
 
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
@@ -24,6 +26,7 @@ JOB_KINDS: dict[str, JobFunction] = {}
 # service that owns its rules (launching, runs, ...), never directly.
 MAINTENANCE_KINDS: set[str] = set()
 MASK = "***"
+WROTE = "cloudsim.wrote"  # session.info: the session's transaction has written
 
 
 class JobGone(Exception):
@@ -43,11 +46,21 @@ def job_kind(name: str, *, maintenance: bool = False) -> Callable[[JobFunction],
 
 
 class JobContext:
-    """What a job body uses to report: stages, progress, log lines (with secrets masked)."""
+    """What a job body uses to report: stages, progress, log lines (with secrets masked).
+
+    Reports go to the job row through their own short transactions, never through the body's
+    session, so they never commit the body's half-done domain changes. The body's changes are
+    committed by the runner when the body returns, and at `checkpoint()`s.
+    """
 
     def __init__(self, job: Job, secrets: Iterable[str] = ()) -> None:
         self.job = job
         self._secrets = [s for s in secrets if s]
+        self._job_id = job.id
+        self._engine = db.engine
+        self._session = db.session()  # the body's session, also seen from its worker threads
+        self._pending: list[tuple[dict[str, object], str]] = []
+        self._lock = threading.Lock()
 
     def mask(self, *secrets: str) -> None:
         """Never show these strings in the job's log or error."""
@@ -60,35 +73,94 @@ class JobContext:
         return text
 
     def log(self, message: str) -> None:
-        """Append timestamped lines to the job log, committing the session's other changes too."""
-        db.session.commit()
+        """Append timestamped lines to the job log."""
         self.line_sink()("", message)
 
     def line_sink(self) -> Callable[[str, str], None]:
-        """Return a thread-safe `(source, line)` logger that appends straight to the job row."""
-        engine, job_id = db.engine, self.job.id
+        """Return a thread-safe `(source, line)` logger that appends to the job row."""
 
         def append(source: str, message: str) -> None:
             stamp = utcnow().strftime("%H:%M:%S")
             prefix = f"[{source}] " if source else ""
             lines = self.masked(message).rstrip("\n").splitlines() or [""]
-            text = "".join(f"{stamp} {prefix}{line}\n" for line in lines)
-            with engine.begin() as conn:
-                conn.execute(update(Job).where(Job.id == job_id).values(log=Job.log.concat(text)))
+            self._report({}, "".join(f"{stamp} {prefix}{line}\n" for line in lines))
 
         return append
 
     def stage(self, name: str, progress: int | None = None) -> None:
         """Enter a named stage, optionally setting progress (0-100)."""
-        self.job.stage = name
+        values: dict[str, object] = {"stage": name}
         if progress is not None:
-            self.job.progress = max(0, min(100, progress))
+            values["progress"] = max(0, min(100, progress))
+        self._report(values, "")
         self.log(f"== {name}")
 
     def progress(self, percent: int) -> None:
-        """Set overall progress (0-100) and commit."""
-        self.job.progress = max(0, min(100, percent))
+        """Set overall progress (0-100)."""
+        self._report({"progress": max(0, min(100, percent))}, "")
+
+    def checkpoint(self) -> None:
+        """Commit the body's domain changes so far: what exists outside the database (a cloud
+        node, a network) is recorded the moment it exists, so a resumed job finds it."""
         db.session.commit()
+        self.flush_reports()
+
+    def flush_reports(self) -> None:
+        """Write the reports held back while the body's transaction held SQLite's write lock."""
+        with self._lock:
+            pending, self._pending = self._pending, []
+            if pending:
+                with self._engine.begin() as conn:
+                    for values, text in pending:
+                        conn.execute(self._update(values, text))
+
+    def fold_reports_into(self, job: Job) -> None:
+        """Put the held-back reports into the job row's own update (its final commit)."""
+        with self._lock:
+            pending, self._pending = self._pending, []
+        text = "".join(t for _, t in pending)
+        for values, _ in pending:
+            for key, value in values.items():
+                setattr(job, key, value)
+        if text:
+            job.log = Job.log.concat(text)  # type: ignore[assignment]
+
+    def _report(self, values: dict[str, object], text: str) -> None:
+        for key, value in values.items():  # keep the body's view current without dirtying it
+            set_committed_value(self.job, key, value)
+        with self._lock:
+            # SQLite has one writer: while the body's transaction has written, a second
+            # connection would wait for it, so the report waits for the next commit instead.
+            if self._engine.dialect.name == "sqlite" and self._session.info.get(WROTE):
+                self._pending.append((values, text))
+                return
+        self.flush_reports()
+        with self._engine.begin() as conn:
+            conn.execute(self._update(values, text))
+
+    def _update(self, values: dict[str, object], text: str) -> Update:
+        return (
+            update(Job)
+            .where(Job.id == self._job_id)
+            .values(**values, **({"log": Job.log.concat(text)} if text else {}))
+        )
+
+
+@event.listens_for(Session, "after_flush")
+def _wrote(session: Session, _context: object) -> None:
+    session.info[WROTE] = True
+
+
+@event.listens_for(Session, "do_orm_execute")
+def _bulk_write(state: ORMExecuteState) -> None:
+    if state.is_insert or state.is_update or state.is_delete:
+        state.session.info[WROTE] = True
+
+
+@event.listens_for(Session, "after_commit")
+@event.listens_for(Session, "after_rollback")
+def _ended(session: Session) -> None:
+    session.info.pop(WROTE, None)
 
 
 def _claim(job_id: str, lease: int) -> bool:
@@ -106,7 +178,13 @@ def _claim(job_id: str, lease: int) -> bool:
                 ),
             ),
         )
-        .values(state=JobState.RUNNING, heartbeat_at=now, attempts=Job.attempts + 1)
+        .values(
+            state=JobState.RUNNING,
+            heartbeat_at=now,
+            attempts=Job.attempts + 1,
+            started_at=func.coalesce(Job.started_at, now),
+            error=None,
+        )
         .execution_options(synchronize_session=False)
     )
     db.session.commit()
@@ -147,8 +225,6 @@ def run_job(self: object, job_id: str) -> str:
     job = db.session.get(Job, job_id)
     assert job is not None
     ctx = JobContext(job)
-    job.started_at = job.started_at or utcnow()
-    job.error = None
     if job.attempts > 1:
         ctx.log(f"resuming after an interrupted attempt (attempt {job.attempts})")
     body = JOB_KINDS.get(job.kind)
@@ -160,6 +236,7 @@ def run_job(self: object, job_id: str) -> str:
         body(ctx)
     except Exception as exc:
         db.session.rollback()
+        ctx.flush_reports()
         ctx.line_sink()("", traceback.format_exc())
         job = db.session.get(Job, job_id)
         assert job is not None
@@ -167,14 +244,15 @@ def run_job(self: object, job_id: str) -> str:
         job.error = ctx.masked(reason) or type(exc).__name__
         job.state = JobState.FAILED
         job.finished_at = utcnow()
-        db.session.commit()
+        db.session.commit()  # the runner is the job's boundary: it commits the outcome
         raise
     finally:
         heartbeat.stopped.set()
         heartbeat.join()
     ctx.log("done")
+    ctx.fold_reports_into(job)
     job.state = JobState.SUCCEEDED
     job.progress = 100
     job.finished_at = utcnow()
-    db.session.commit()
+    db.session.commit()  # the body's changes, its last reports and the job's end, at once
     return str(job.state)

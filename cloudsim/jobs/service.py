@@ -10,28 +10,34 @@ from typing import Any
 from celery import shared_task
 from flask import current_app
 from kombu.exceptions import OperationalError
-from sqlalchemy import Select, or_, select
+from sqlalchemy import Select, event, or_, select
+from sqlalchemy.orm import Session
 
 from cloudsim.audit.service import record
-from cloudsim.auth.policy import require_role, require_team_access
+from cloudsim.auth.policy import Actor, require_role, require_team_access
 from cloudsim.errors import InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JOB_KINDS, MAINTENANCE_KINDS, run_job
-from cloudsim.models import Job, JobState, Role, User, utcnow
+from cloudsim.models import Job, JobState, Role, utcnow
 
 log = logging.getLogger(__name__)
+UNSENT = "cloudsim.unsent_jobs"  # session.info: ids of jobs to send after the commit
 
 
 def enqueue(
     kind: str,
-    actor: User | None,
+    actor: Actor,
     *,
     target_type: str | None = None,
     target_id: int | None = None,
     team_id: int | None = None,
     params: dict[str, Any] | None = None,
 ) -> Job:
-    """Save a job and send it to the queue; if the queue is down the sweeper sends it later."""
+    """Add a job to the session; its message is sent once the caller's transaction commits.
+
+    Sending after the commit means a worker never looks for a job row that is not there yet,
+    and a rolled-back job is never sent. If the queue is down, the sweeper sends it later.
+    """
     if kind not in JOB_KINDS:
         raise InvalidInput(f"unknown job kind {kind!r}; known: {', '.join(sorted(JOB_KINDS))}")
     job_id = str(uuid.uuid4())
@@ -47,12 +53,12 @@ def enqueue(
     )
     db.session.add(job)
     record("job.start", actor, target_type="job", target_id=job_id, team_id=team_id, kind=kind)
-    db.session.commit()
-    send(job)
+    db.session.flush()
+    db.session.info.setdefault(UNSENT, []).append(job_id)
     return job
 
 
-def start_maintenance(kind: str, actor: User | None) -> Job:
+def start_maintenance(kind: str, actor: Actor) -> Job:
     """Start a maintenance job such as diagnostics (admins); other kinds belong to services."""
     require_role(actor, Role.ADMIN, "start maintenance jobs")
     if kind not in MAINTENANCE_KINDS:
@@ -61,17 +67,33 @@ def start_maintenance(kind: str, actor: User | None) -> Job:
     return enqueue(kind, actor)
 
 
+@event.listens_for(Session, "after_commit")
+def _send_committed(session: Session) -> None:
+    for job_id in session.info.pop(UNSENT, []):
+        send_id(job_id)
+
+
+@event.listens_for(Session, "after_rollback")
+def _forget_rolled_back(session: Session) -> None:
+    session.info.pop(UNSENT, None)
+
+
 def send(job: Job) -> bool:
     """Put the job's message on the queue; return False (and log) when the broker is down."""
+    return send_id(job.id)
+
+
+def send_id(job_id: str) -> bool:
+    """Put a saved job's message on the queue; False (logged) when that fails."""
     try:
-        run_job.apply_async(args=[job.id], task_id=job.id, retry=False)
-    except OperationalError as exc:
-        log.warning("job %s saved but not queued (%s); the sweeper will send it", job.id, exc)
+        run_job.apply_async(args=[job_id], task_id=job_id, retry=False)
+    except (OperationalError, OSError) as exc:
+        log.warning("job %s saved but not queued (%s); the sweeper will send it", job_id, exc)
         return False
     return True
 
 
-def get_job(actor: User | None, job_id: str) -> Job:
+def get_job(actor: Actor, job_id: str) -> Job:
     """Return a job the actor may see."""
     job = db.session.get(Job, job_id)
     if job is None:
@@ -80,7 +102,7 @@ def get_job(actor: User | None, job_id: str) -> Job:
     return job
 
 
-def visible_jobs(actor: User | None, *, state: str | None = None) -> Select[Job]:
+def visible_jobs(actor: Actor, *, state: str | None = None) -> Select[Job]:
     """Return a query for the jobs the actor may see, newest first."""
     query = select(Job).order_by(Job.created_at.desc(), Job.id)
     if actor is not None and not actor.has_role(Role.OFFICER):

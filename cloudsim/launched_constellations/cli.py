@@ -7,7 +7,8 @@ import time
 
 import click
 
-from cloudsim.cli import app_context, emit, reports_errors
+from cloudsim.auth.policy import SYSTEM
+from cloudsim.cli import app_context, commit, emit, reports_errors
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service
 from cloudsim.launched_constellations.connect import machine_host_keys, targets
@@ -108,9 +109,10 @@ def launch(
     with app_context():
         team_id = find_team(team_name).id if team_name else None
         created, job = service.launch(
-            None, name=name, kind=kind, provider=provider, team_id=team_id
+            SYSTEM, name=name, kind=kind, provider=provider, team_id=team_id
         )
         if wait:
+            commit()
             job = _wait(job.id, as_json)
             db.session.refresh(created)
         emit(
@@ -128,7 +130,7 @@ def launch(
 def list_constellations(as_json: bool) -> None:
     """List constellations."""
     with app_context():
-        rows = db.session.scalars(service.visible_constellations(None)).all()
+        rows = db.session.scalars(service.visible_constellations(SYSTEM)).all()
         lines = "\n".join(
             f"{c.name}\t{c.kind}\t{c.provider}\t{c.state.value}\t{c.team.name if c.team else '-'}"
             for c in rows
@@ -143,7 +145,7 @@ def list_constellations(as_json: bool) -> None:
 def show(name: str, as_json: bool) -> None:
     """Show a constellation's machines, roles, addresses and states."""
     with app_context():
-        found = service.get_constellation(None, name)
+        found = service.get_constellation(SYSTEM, name)
         lines = [f"{found.name} ({found.kind} on {found.provider}): {found.state.value}"]
         if found.error:
             lines.append(f"error: {found.error}")
@@ -162,8 +164,9 @@ def show(name: str, as_json: bool) -> None:
 def terminate(name: str, wait: bool) -> None:
     """Terminate a constellation, releasing every resource it has."""
     with app_context():
-        job = service.terminate(None, name)
+        job = service.terminate(SYSTEM, name)
         if wait:
+            commit()
             job = _wait(job.id, False)
             if job.state.value == "failed":
                 raise click.ClickException(f"terminate failed: {job.error}")
@@ -180,7 +183,7 @@ def orphans(destroy: bool, as_json: bool) -> None:
     """List provider nodes that no live constellation owns; --destroy removes them."""
     with app_context() as app:
         config = app.config["CLOUDSIM"]
-        found = destroy_orphans(None, config) if destroy else find_orphans(config)
+        found = destroy_orphans(SYSTEM, config) if destroy else find_orphans(config)
         verb = "destroyed" if destroy else "orphan"
         lines = "\n".join(
             f"{verb}: {o.provider} {o.name} ({o.node_id}) of {o.constellation}" for o in found
@@ -196,7 +199,7 @@ def orphans(destroy: bool, as_json: bool) -> None:
 def ssh(name: str, machine: str, command: tuple[str, ...]) -> None:
     """Run COMMAND on MACHINE of constellation NAME (after `--`)."""
     with app_context() as app:
-        found = service.get_constellation(None, name)
+        found = service.get_constellation(SYSTEM, name)
         keys = constellation_keypair(found)
         reach = targets(found, keys, app.config["CLOUDSIM"])
         if machine not in reach:

@@ -64,7 +64,7 @@ def targets(constellation: Constellation, keys: KeyPair, config: Config) -> dict
         # rows from before routes were recorded: ask the provider once
         provider = open_provider(constellation.provider, config)
         record_routes(constellation, provider, provider.nodes(constellation.name))
-        db.session.commit()
+        db.session.flush()  # the caller's boundary commits them
     routes = {
         m.name: Route.from_json(m.ssh_route) if m.ssh_route else Route(host=m.private_ip or "")
         for m in constellation.machines

@@ -70,7 +70,7 @@ def launch_constellation(ctx: JobContext) -> None:
         constellation = _constellation(ctx)
         constellation.state = ConstellationState.ERROR
         constellation.error = ctx.masked(f"{ctx.job.stage}: {exc}")
-        db.session.commit()
+        ctx.checkpoint()  # the error state survives the runner's rollback
         raise
     constellation.state = ConstellationState.READY
     for machine in constellation.machines:
@@ -90,7 +90,7 @@ def _launch(
     ctx.stage("machines", 10)
     nodes = ensure_machines(ctx, provider, constellation, kind, keys, subnet)
     record_routes(constellation, provider, nodes)
-    db.session.commit()
+    ctx.checkpoint()
     executor = SSHExecutor(
         machine_host_keys(constellation),
         log_sink=ctx.line_sink(),
@@ -174,7 +174,7 @@ def ensure_network(
     }
     for machine in constellation.machines:
         machine.private_ip = kind.machine(machine.name).address(network.cidr)
-    db.session.commit()
+    ctx.checkpoint()
     return str(network.cidr)
 
 
@@ -207,7 +207,7 @@ def ensure_machines(
     rows = {m.name: m for m in constellation.machines}
     for definition in missing:
         rows[definition.name].state = MachineState.CREATING
-    db.session.commit()
+    ctx.checkpoint()
     image = provider.image()
     sizes = {m.name: provider.size(m.size) for m in missing}
     name = constellation.name  # plain values only: the threads have no database session
@@ -240,7 +240,7 @@ def ensure_machines(
         # Providers of existing machines (servers) decide the address; clouds honour ours.
         row.private_ip = node.private_ips[0] if node.private_ips else row.private_ip
         row.state = MachineState.RUNNING
-    db.session.commit()
+    ctx.checkpoint()
     return list(nodes.values())
 
 
@@ -282,7 +282,7 @@ def _deploy(
     plans: dict[str, list[PlanItem]],
 ) -> None:
     """Apply each machine's plan, all machines at once; fail naming every machine that failed."""
-    db.session.commit()  # worker threads write the log on their own connections
+    ctx.checkpoint()  # the machines' threads write the log while this waits
 
     def deploy(target: Target) -> int:
         changed = 0
@@ -313,7 +313,7 @@ def terminate_constellation(ctx: JobContext) -> None:
     nodes = provider.nodes(constellation.name)
     for machine in constellation.machines:
         machine.state = MachineState.TERMINATING
-    db.session.commit()
+    ctx.checkpoint()
     _in_parallel(nodes, lambda node: driver.destroy_node(node), lambda node: node.name)
     ctx.log(f"destroyed {len(nodes)} machine(s)")
     ctx.stage("network", 70)

@@ -64,7 +64,7 @@ def constellation_secret(
             value=make(),
         )
         db.session.add(secret)
-        db.session.commit()
+        db.session.flush()  # the caller's boundary commits it with the rest
     return secret.value
 
 

@@ -11,10 +11,11 @@ from flask import current_app
 from sqlalchemy import select
 
 from cloudsim.audit.service import record
+from cloudsim.auth.policy import SYSTEM, Actor
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
-from cloudsim.models import Constellation, ConstellationState, User
+from cloudsim.models import Constellation, ConstellationState
 from cloudsim.providers.service import PROVIDERS, open_provider, provider_settings
 
 log = logging.getLogger(__name__)
@@ -62,7 +63,7 @@ def find_orphans(config: Config) -> list[Orphan]:
     return orphans
 
 
-def destroy_orphans(actor: User | None, config: Config) -> list[Orphan]:
+def destroy_orphans(actor: Actor, config: Config) -> list[Orphan]:
     """Destroy every orphan node; return what was destroyed."""
     orphans = find_orphans(config)
     drivers = {p: open_provider(p, config).driver for p in {o.provider for o in orphans}}
@@ -79,7 +80,6 @@ def destroy_orphans(actor: User | None, config: Config) -> list[Orphan]:
             provider=orphan.provider,
             name=orphan.name,
         )
-    db.session.commit()
     return orphans
 
 
@@ -96,6 +96,7 @@ def reconcile() -> int:
             orphan.constellation,
         )
     if orphans:
-        record("provider.orphans_found", None, count=len(orphans), nodes=[o.name for o in orphans])
-        db.session.commit()
+        record(
+            "provider.orphans_found", SYSTEM, count=len(orphans), nodes=[o.name for o in orphans]
+        )
     return len(orphans)

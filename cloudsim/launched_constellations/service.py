@@ -10,12 +10,12 @@ from sqlalchemy import Select, select
 from sqlalchemy.orm import selectinload
 
 from cloudsim.audit.service import record
-from cloudsim.auth.policy import require_role, require_team_access
+from cloudsim.auth.policy import Actor, require_role, require_team_access
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
 from cloudsim.launched_constellations.keys import constellation_keypair, instance_admin_password
-from cloudsim.models import Constellation, ConstellationState, Job, Machine, Role, Team, User
+from cloudsim.models import Constellation, ConstellationState, Job, Machine, Role, Team
 from cloudsim.providers.service import PROVIDERS
 from constellations.definition import DefinitionError, load_kind
 from constellations.plans import PLANS
@@ -25,7 +25,7 @@ NAME = re.compile(r"[a-z0-9]([a-z0-9-]{0,22}[a-z0-9])?\Z")
 BUSY = (ConstellationState.PENDING, ConstellationState.LAUNCHING, ConstellationState.TERMINATING)
 
 
-def visible_constellations(actor: User | None) -> Select[Constellation]:
+def visible_constellations(actor: Actor) -> Select[Constellation]:
     """Return a query for the constellations the actor may see, newest first."""
     query = (
         select(Constellation)
@@ -39,7 +39,7 @@ def visible_constellations(actor: User | None) -> Select[Constellation]:
     return query
 
 
-def get_constellation(actor: User | None, ref: int | str) -> Constellation:
+def get_constellation(actor: Actor, ref: int | str) -> Constellation:
     """Return a constellation by id or name, if the actor may see it."""
     if isinstance(ref, int) or ref.isdigit():
         constellation = db.session.get(Constellation, int(ref))
@@ -62,7 +62,7 @@ def latest_job(constellation: Constellation) -> Job | None:
 
 
 def launch(
-    actor: User | None, *, name: str, kind: str, provider: str, team_id: int | None = None
+    actor: Actor, *, name: str, kind: str, provider: str, team_id: int | None = None
 ) -> tuple[Constellation, Job]:
     """Record a new constellation and start the job that launches it (admins)."""
     require_role(actor, Role.ADMIN, "launch constellations")
@@ -105,7 +105,6 @@ def launch(
         kind=kind,
         provider=provider,
     )
-    db.session.commit()
     job = enqueue(
         "constellation.launch",
         actor,
@@ -116,7 +115,7 @@ def launch(
     return constellation, job
 
 
-def retry(actor: User | None, ref: int | str) -> Job:
+def retry(actor: Actor, ref: int | str) -> Job:
     """Launch again a constellation that ended in error (resuming what exists)."""
     require_role(actor, Role.ADMIN, "retry launches")
     constellation = get_constellation(actor, ref)
@@ -126,7 +125,7 @@ def retry(actor: User | None, ref: int | str) -> Job:
     return _start_job(actor, constellation, "constellation.retry", "constellation.launch")
 
 
-def terminate(actor: User | None, ref: int | str) -> Job:
+def terminate(actor: Actor, ref: int | str) -> Job:
     """Start releasing every resource of a constellation (admins); safe to repeat."""
     require_role(actor, Role.ADMIN, "terminate constellations")
     constellation = get_constellation(actor, ref)
@@ -143,8 +142,8 @@ def terminate(actor: User | None, ref: int | str) -> Job:
     return _start_job(actor, constellation, "constellation.terminate", "constellation.terminate")
 
 
-def _start_job(actor: User | None, constellation: Constellation, action: str, kind: str) -> Job:
-    """Audit an action on a constellation, commit it, and start the job that carries it out."""
+def _start_job(actor: Actor, constellation: Constellation, action: str, kind: str) -> Job:
+    """Audit an action on a constellation and start the job that carries it out."""
     record(
         action,
         actor,
@@ -152,7 +151,6 @@ def _start_job(actor: User | None, constellation: Constellation, action: str, ki
         target_id=constellation.id,
         team_id=constellation.team_id,
     )
-    db.session.commit()
     return enqueue(
         kind,
         actor,
@@ -162,7 +160,7 @@ def _start_job(actor: User | None, constellation: Constellation, action: str, ki
     )
 
 
-def ssh_bundle(actor: User | None, ref: int | str) -> tuple[str, bytes]:
+def ssh_bundle(actor: Actor, ref: int | str) -> tuple[str, bytes]:
     """Return (file name, zip) with the constellation's SSH key and how to use it (officers)."""
     require_role(actor, Role.OFFICER, "download SSH keys")
     constellation = get_constellation(actor, ref)
@@ -204,5 +202,4 @@ def ssh_bundle(actor: User | None, ref: int | str) -> tuple[str, bytes]:
         target_id=constellation.id,
         team_id=constellation.team_id,
     )
-    db.session.commit()
     return f"{constellation.name}-ssh.zip", buffer.getvalue()

@@ -10,7 +10,6 @@ from collections.abc import Callable
 from typing import Any
 
 from cloudsim.errors import CloudSimError
-from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext
 from cloudsim.models import Constellation, utcnow
 from constellations.definition import PUBLIC, ConstellationKind, Reachability
@@ -84,7 +83,7 @@ def verify_constellation(
     stamp = utcnow().isoformat()
     for row in constellation.machines:
         row.verification = {**results[row.name], "at": stamp}
-    db.session.commit()
+    ctx.checkpoint()  # kept even when verification fails below
     passed = sum(c["ok"] for r in results.values() for c in r["checks"])
     ctx.log(f"reachability: {passed} of {len(kind.reachability)} checks as expected")
     if failures:

@@ -10,7 +10,7 @@ from typing import Any
 from sqlalchemy import select
 
 from cloudsim.audit.service import record
-from cloudsim.auth.policy import require_team_access
+from cloudsim.auth.policy import SYSTEM, require_team_access
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.keys import constellation_secret
@@ -114,7 +114,7 @@ def revoke_user(user: User) -> list[Constellation]:
         db.session.delete(secret)
         record(
             "vpn.revoke",
-            None,
+            SYSTEM,
             target_type="user",
             target_id=user.id,
             team_id=constellation.team_id,
@@ -122,7 +122,6 @@ def revoke_user(user: User) -> list[Constellation]:
             serial=serial,
         )
         changed.append(constellation)
-    db.session.commit()
     return changed
 
 
@@ -197,7 +196,6 @@ def vpn_bundle(
         team_id=constellation.team_id,
         user=user.email,
     )
-    db.session.commit()
     return f"{constellation.name}-vpn-{user.email.split('@')[0]}.zip", buffer.getvalue()
 
 
@@ -208,7 +206,7 @@ def revoke_and_push(user: User) -> None:
     for constellation in revoke_user(user):
         enqueue(
             "constellation.refresh_vpn",
-            None,
+            SYSTEM,
             target_type="constellation",
             target_id=constellation.id,
             team_id=constellation.team_id,

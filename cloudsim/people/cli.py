@@ -6,6 +6,7 @@ import sys
 
 import click
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, emit, reports_errors
 from cloudsim.models import Role, Team, User
 from cloudsim.people import service
@@ -38,7 +39,7 @@ def team() -> None:
 def create_team(name: str, as_json: bool) -> None:
     """Create a team called NAME."""
     with app_context():
-        created = service.create_team(None, name)
+        created = service.create_team(SYSTEM, name)
         emit(team_data(created), as_json, f"created team {created.name} (id {created.id})")
 
 
@@ -48,7 +49,7 @@ def create_team(name: str, as_json: bool) -> None:
 def list_teams(as_json: bool) -> None:
     """List teams."""
     with app_context():
-        teams = service.visible_teams(None)
+        teams = service.visible_teams(SYSTEM)
         lines = "\n".join(f"{t.id}\t{t.name}\t{len(t.members)} members" for t in teams)
         emit([team_data(t) for t in teams], as_json, lines or "no teams")
 
@@ -79,7 +80,7 @@ def create_user(
     with app_context():
         team_id = service.find_team(team_name).id if team_name else None
         created = service.create_user(
-            None, email=email, role=role, team_id=team_id, name=name, password=password
+            SYSTEM, email=email, role=role, team_id=team_id, name=name, password=password
         )
         data = user_data(created.user)
         text = f"created {created.user.role.value} {created.user.email} (id {created.user.id})"
@@ -95,7 +96,7 @@ def create_user(
 def list_users(as_json: bool) -> None:
     """List users."""
     with app_context():
-        users = service.visible_users(None)
+        users = service.visible_users(SYSTEM)
         lines = "\n".join(
             f"{u.id}\t{u.email}\t{u.role.value}\t{u.team.name if u.team else '-'}" for u in users
         )
@@ -138,7 +139,7 @@ def update_user(
         elif no_team:
             team_id = None
         updated = service.update_user(
-            None,
+            SYSTEM,
             target.id,
             name=name,
             role=role,

@@ -12,7 +12,7 @@ from sqlalchemy.orm import selectinload
 
 from cloudsim.audit.service import record
 from cloudsim.auth.passwords import generate_password, hash_password
-from cloudsim.auth.policy import require_role, require_team_access
+from cloudsim.auth.policy import SYSTEM, Actor, require_role, require_team_access
 from cloudsim.auth.session import end_sessions
 from cloudsim.auth.tokens import revoke_all_tokens
 from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
@@ -49,7 +49,7 @@ def parse_role(value: str | Role) -> Role:
 # Teams -----------------------------------------------------------------------------------
 
 
-def get_team(actor: User | None, team_id: int) -> Team:
+def get_team(actor: Actor, team_id: int) -> Team:
     """Return the team if it exists and the actor may see it."""
     require_team_access(actor, team_id, "team", team_id)
     team = db.session.get(Team, team_id)
@@ -68,7 +68,7 @@ def find_team(name_or_id: str) -> Team:
     return team
 
 
-def visible_teams(actor: User | None) -> list[Team]:
+def visible_teams(actor: Actor) -> list[Team]:
     """Return the teams the actor may see, by name."""
     query = select(Team).order_by(Team.name).options(selectinload(Team.members))
     if actor is not None and not actor.has_role(Role.OFFICER):
@@ -102,7 +102,7 @@ def _flush_team_name(name: str) -> None:
         raise Conflict(f"a team named {name!r} already exists") from None
 
 
-def create_team(actor: User | None, name: str) -> Team:
+def create_team(actor: Actor, name: str) -> Team:
     """Create a team (officers and admins)."""
     require_role(actor, Role.OFFICER, "create teams")
     name = _clean_team_name(name)
@@ -111,11 +111,11 @@ def create_team(actor: User | None, name: str) -> Team:
     db.session.add(team)
     _flush_team_name(name)
     record("team.create", actor, target_type="team", target_id=team.id, team_id=team.id, name=name)
-    db.session.commit()
+    db.session.flush()
     return team
 
 
-def rename_team(actor: User | None, team_id: int, name: str) -> Team:
+def rename_team(actor: Actor, team_id: int, name: str) -> Team:
     """Rename a team (officers and admins)."""
     require_role(actor, Role.OFFICER, "rename teams")
     team = get_team(actor, team_id)
@@ -132,11 +132,11 @@ def rename_team(actor: User | None, team_id: int, name: str) -> Team:
         old=old,
         new=name,
     )
-    db.session.commit()
+    db.session.flush()
     return team
 
 
-def delete_team(actor: User | None, team_id: int) -> None:
+def delete_team(actor: Actor, team_id: int) -> None:
     """Delete a team that has no members and no live constellation."""
     require_role(actor, Role.OFFICER, "delete teams")
     team = get_team(actor, team_id)
@@ -147,7 +147,7 @@ def delete_team(actor: User | None, team_id: int) -> None:
         raise Conflict(f"team {team.name!r} still has constellation {live[0].name!r}")
     record("team.delete", actor, target_type="team", target_id=team.id, name=team.name)
     db.session.delete(team)
-    db.session.commit()
+    db.session.flush()
 
 
 # Users -----------------------------------------------------------------------------------
@@ -161,7 +161,7 @@ class NewUser:
     generated_password: str | None
 
 
-def get_user(actor: User | None, user_id: int) -> User:
+def get_user(actor: Actor, user_id: int) -> User:
     """Return the user if it exists and the actor may see it (officers; or oneself)."""
     if actor is not None and not actor.has_role(Role.OFFICER) and actor.id != user_id:
         raise NotFound.of("user", user_id)
@@ -182,7 +182,7 @@ def find_user(email_or_id: str) -> User:
     return user
 
 
-def visible_users(actor: User | None, team_id: int | None = None) -> list[User]:
+def visible_users(actor: Actor, team_id: int | None = None) -> list[User]:
     """Return the users the actor may see: officers all, users their own team's."""
     query = select(User).order_by(User.email).options(selectinload(User.team))
     if actor is not None and not actor.has_role(Role.OFFICER):
@@ -192,7 +192,7 @@ def visible_users(actor: User | None, team_id: int | None = None) -> list[User]:
     return list(db.session.scalars(query))
 
 
-def _check_manage(actor: User | None, role: Role) -> None:
+def _check_manage(actor: Actor, role: Role) -> None:
     """Officers manage team users; only admins create or change officers and admins."""
     require_role(actor, Role.OFFICER, "manage users")
     if actor is not None and role != Role.USER and not actor.has_role(Role.ADMIN):
@@ -212,7 +212,7 @@ def _team_for_role(role: Role, team_id: int | None) -> int | None:
 
 
 def create_user(
-    actor: User | None,
+    actor: Actor,
     *,
     email: str,
     role: str | Role = Role.USER,
@@ -246,12 +246,12 @@ def create_user(
         email=email,
         role=role.value,
     )
-    db.session.commit()
+    db.session.flush()
     return NewUser(user, generated)
 
 
 def update_user(
-    actor: User | None,
+    actor: Actor,
     user_id: int,
     *,
     name: str | None = None,
@@ -298,13 +298,13 @@ def update_user(
     record(
         "user.update", actor, target_type="user", target_id=user.id, team_id=user.team_id, **changes
     )
-    db.session.commit()
+    db.session.flush()
     if leaving_team:
         revoke_team_access(user)
     return user
 
 
-def delete_user(actor: User | None, user_id: int) -> None:
+def delete_user(actor: Actor, user_id: int) -> None:
     """Delete a user (never oneself, never the last admin)."""
     user = get_user(actor, user_id)
     _check_manage(actor, user.role)
@@ -322,7 +322,7 @@ def delete_user(actor: User | None, user_id: int) -> None:
         email=user.email,
     )
     db.session.delete(user)
-    db.session.commit()
+    db.session.flush()
 
 
 def _ensure_another_admin(user: User) -> None:
@@ -339,4 +339,4 @@ def ensure_first_admin(email: str, password: str | None) -> NewUser | None:
     """Create the first admin when no admin exists; return it (with its password if generated)."""
     if db.session.scalar(select(User.id).where(User.role == Role.ADMIN).limit(1)) is not None:
         return None
-    return create_user(None, email=email, role=Role.ADMIN, password=password, name="Admin")
+    return create_user(SYSTEM, email=email, role=Role.ADMIN, password=password, name="Admin")

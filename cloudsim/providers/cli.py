@@ -9,9 +9,9 @@ import click
 import yaml
 
 from cloudsim.audit.service import record
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, emit, reports_errors
 from cloudsim.errors import CloudSimError
-from cloudsim.extensions import db
 from cloudsim.providers.service import PROVIDERS, configure_provider, provider_settings
 
 
@@ -73,13 +73,12 @@ def configure_ec2(
         configure_provider("ec2", settings)
         record(
             "provider.configure",
-            None,
+            SYSTEM,
             target_type="provider",
             target_id="ec2",
             region=region,
             image=image,
         )
-        db.session.commit()
         click.echo(f"ec2 configured (region {region}, image {image})")
 
 
@@ -105,12 +104,11 @@ def configure_servers(inventory_file: TextIO) -> None:
         configure_provider("servers", {"inventory": inventory})
         record(
             "provider.configure",
-            None,
+            SYSTEM,
             target_type="provider",
             target_id="servers",
             servers=len(inventory),
         )
-        db.session.commit()
         click.echo(
             f"servers configured ({len(inventory)} servers); keep the file safe or "
             "delete it: the keys are now stored encrypted"

@@ -118,7 +118,7 @@ def configure_provider(name: str, settings: dict[str, Any]) -> None:
         )
         db.session.add(secret)
     secret.value = json.dumps(settings)
-    db.session.commit()
+    db.session.flush()
 
 
 def _stored(name: str) -> Secret | None:

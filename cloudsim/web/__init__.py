@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from flask import Flask, current_app, render_template, request
+from flask import Flask, Response, current_app, render_template, request
 from flask.typing import ResponseReturnValue
 from flask_wtf.csrf import CSRFError
 from markupsafe import escape
@@ -31,6 +31,13 @@ def register_web(app: Flask) -> None:
     app.jinja_env.globals.update(Role=Role)
     app.jinja_env.filters["datetime"] = format_datetime
 
+    @app.after_request
+    def commit(response: Response) -> Response:
+        # A request is a transaction boundary: what it changed is committed once, here; the
+        # error handlers below roll back first, so a failed request commits nothing.
+        db.session.commit()
+        return response
+
     @app.errorhandler(CloudSimError)
     def service_error(exc: CloudSimError) -> ResponseReturnValue:
         _rollback()
@@ -38,10 +45,12 @@ def register_web(app: Flask) -> None:
 
     @app.errorhandler(CSRFError)
     def csrf_error(exc: CSRFError) -> ResponseReturnValue:
+        _rollback()
         return _error_page(400, "The form expired or was not sent by CloudSim. Reload and retry.")
 
     @app.errorhandler(HTTPException)
     def http_error(exc: HTTPException) -> ResponseReturnValue:
+        _rollback()
         # webargs answers 422 for invalid fields; to callers it is a plain bad request.
         code = 400 if exc.code == 422 else exc.code or 500
         # Validation errors of the API carry the message of every bad field.

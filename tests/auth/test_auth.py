@@ -7,6 +7,7 @@ import re
 from flask import Flask
 from sqlalchemy import select
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.extensions import db
 from cloudsim.models import ApiToken, AuditEvent, User
 from cloudsim.people.service import update_user
@@ -74,12 +75,12 @@ def test_disabled_user_and_changed_password_end_sessions(
     client = app.test_client()
     log_in(client, user)
     assert client.get("/account").status_code == 200
-    update_user(None, user.id, password="another long password")
+    update_user(SYSTEM, user.id, password="another long password")
     assert client.get("/account").status_code == 302  # logged out everywhere
     client2 = app.test_client()
     client2.post("/login", data={"email": user.email, "password": "another long password"})
     assert client2.get("/account").status_code == 200
-    update_user(None, user.id, active=False)
+    update_user(SYSTEM, user.id, active=False)
     assert client2.get("/account").status_code == 302
     denied = client2.post("/login", data={"email": user.email, "password": "another long password"})
     assert denied.status_code == 401

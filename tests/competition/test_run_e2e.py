@@ -18,6 +18,7 @@ from flask import Flask
 from playwright.sync_api import Browser, expect
 from werkzeug.serving import make_server
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.competition.artifacts import (
     RUN_LOGS,
     LogStore,
@@ -82,13 +83,13 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     ending: str,
 ) -> None:
     timeout_s = RUN_SECONDS if ending == "time_limit" else 4 * RUN_SECONDS
-    team_a = people_service.create_team(None, "Team A")
-    team_b = people_service.create_team(None, "Team B")
+    team_a = people_service.create_team(SYSTEM, "Team A")
+    team_b = people_service.create_team(SYSTEM, "Team B")
     officer = make_user(Role.OFFICER)
     user_a, user_b = make_user(Role.USER, team_a), make_user(Role.USER, team_b)
     celery = constellations_app.extensions["celery"]
     with start_worker(celery, pool="threads", concurrency=2, perform_ping_check=False):
-        constellation, job = constellations.launch(None, name="e2e", kind=kind, provider="local")
+        constellation, job = constellations.launch(SYSTEM, name="e2e", kind=kind, provider="local")
         constellation.team_id = team_a.id
         db.session.commit()
         done = finished(job.id)

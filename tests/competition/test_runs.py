@@ -149,6 +149,7 @@ def test_the_beat_restarts_a_failed_stop_job_a_few_times_then_leaves_it(
     run.state = RunState.RUNNING
     db.session.commit()
     runs.stop_run(people["user_a"], run.id)
+    db.session.commit()
     for attempt in range(1, MAX_STOP_ATTEMPTS + 1):
         stops = db.session.query(Job).filter_by(kind="run.stop", target_id=run.id).all()
         assert len(stops) == attempt

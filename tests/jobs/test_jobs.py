@@ -10,11 +10,13 @@ from pathlib import Path
 import pytest
 from celery.contrib.testing.worker import start_worker
 from flask import Flask
+from sqlalchemy import select
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue, lost_jobs, send, sweep_jobs
-from cloudsim.models import Job, JobState, User, utcnow
+from cloudsim.models import Job, JobState, Team, User, utcnow
 from tests.conftest import log_in, running_app
 from tests.support import job_kinds
 from tests.support.servers import wait_for
@@ -43,6 +45,7 @@ def worker(app: Flask) -> Iterator[None]:
 
 def finished(job_id: str, timeout: float = 30) -> Job:
     """Wait for a job to reach a final state and return its row, freshly read."""
+    db.session.commit()  # the test is the boundary: its commit sends the job
 
     def final() -> Job | None:
         db.session.expire_all()
@@ -53,7 +56,7 @@ def finished(job_id: str, timeout: float = 30) -> Job:
 
 
 def test_diagnostics_job_runs_on_the_worker(app: Flask, worker: None) -> None:
-    job = finished(enqueue("diagnostics", None).id)
+    job = finished(enqueue("diagnostics", SYSTEM).id)
     assert job.state == JobState.SUCCEEDED, job.error
     assert job.progress == 100 and job.attempts == 1
     for line in ("== database", "job queue reachable", "encryption keys usable", "GiB free"):
@@ -62,19 +65,35 @@ def test_diagnostics_job_runs_on_the_worker(app: Flask, worker: None) -> None:
 
 
 def test_failed_job_records_the_reason_with_secrets_masked(app: Flask, worker: None) -> None:
-    job = finished(enqueue("test.fail", None).id)
+    job = finished(enqueue("test.fail", SYSTEM).id)
     assert job.state == JobState.FAILED
     assert job.error == "cloud refused key ***"
     assert job.stage == "talking to the cloud" and job.progress == 40
     assert "Traceback" in job.log and job_kinds.SECRET not in job.log + job.error
 
 
+def test_a_job_is_sent_only_once_its_transaction_commits(app: Flask, worker: None) -> None:
+    dropped = enqueue("diagnostics", SYSTEM).id
+    db.session.rollback()  # the caller failed: neither the row nor the message may remain
+    assert db.session.get(Job, dropped) is None
+    job = enqueue("diagnostics", SYSTEM)
+    assert job.state == JobState.QUEUED
+    assert finished(job.id).state == JobState.SUCCEEDED  # finished() commits, as a boundary
+
+
+def test_reports_never_commit_a_failing_job_body_s_changes(app: Flask, worker: None) -> None:
+    job = finished(enqueue("test.half_done", SYSTEM, params={"team": "half-done"}).id)
+    assert job.state == JobState.FAILED and job.error == "failed half-way"
+    assert "made a team" in job.log and job.stage == "changing things"
+    assert db.session.scalar(select(Team).where(Team.name == "half-done")) is None
+
+
 def test_a_second_delivery_of_a_finished_job_does_nothing(app: Flask, worker: None) -> None:
-    job = finished(enqueue("diagnostics", None).id)
+    job = finished(enqueue("diagnostics", SYSTEM).id)
     log_before = job.log
     send(job)
     send(job)
-    sentinel = finished(enqueue("diagnostics", None).id)  # the solo worker runs in order
+    sentinel = finished(enqueue("diagnostics", SYSTEM).id)  # the solo worker runs in order
     assert sentinel.state == JobState.SUCCEEDED
     db.session.expire_all()
     again = db.session.get(Job, job.id)
@@ -114,7 +133,7 @@ def test_a_live_job_is_not_taken_over(app: Flask, worker: None, markers: Path) -
     db.session.commit()
     assert lost_jobs() == []
     send(job)
-    finished(enqueue("diagnostics", None).id)
+    finished(enqueue("diagnostics", SYSTEM).id)
     db.session.expire_all()
     assert db.session.get(Job, job.id).attempts == 1 and not list(markers.iterdir())
 
@@ -124,7 +143,8 @@ def test_a_job_saved_while_the_queue_is_down_is_sent_later(
 ) -> None:
     dead = make_config(redis_url="redis://127.0.0.1:1/0", stale_job_seconds=0)
     with running_app(dead):
-        job = enqueue("diagnostics", None)
+        job = enqueue("diagnostics", SYSTEM)
+        db.session.commit()  # the message cannot be sent: the row stays, queued
         assert job.state == JobState.QUEUED
         assert [j.id for j in lost_jobs()] == [job.id]
         assert sweep_jobs() == 0  # still down: nothing sent, nothing lost
@@ -133,7 +153,7 @@ def test_a_job_saved_while_the_queue_is_down_is_sent_later(
 def test_job_page_follows_progress_and_log(
     app: Flask, worker: None, people: dict[str, User | None]
 ) -> None:
-    job = finished(enqueue("diagnostics", None).id)
+    job = finished(enqueue("diagnostics", SYSTEM).id)
     client = app.test_client()
     log_in(client, people["officer"])  # type: ignore[arg-type]
     page = client.get(f"/jobs/{job.id}").get_data(as_text=True)
@@ -152,8 +172,9 @@ def test_killing_the_worker_mid_job_loses_nothing(
         process = worker_process(config, pytestconfig.rootpath)
         try:
             job = enqueue(
-                "test.slow", None, params={"marker_dir": str(markers), "steps": 6, "seconds": 0.4}
+                "test.slow", SYSTEM, params={"marker_dir": str(markers), "steps": 6, "seconds": 0.4}
             )
+            db.session.commit()
             wait_for(lambda: (markers / "attempt-1").exists(), 60, "the first attempt")
         finally:
             kill_worker(process)

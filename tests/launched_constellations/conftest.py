@@ -63,6 +63,7 @@ def constellations_worker(constellations_app: Flask) -> Iterator[None]:
 
 def finished(job_id: str, timeout: float = 600) -> Job:
     """Wait for a job to reach a final state and return its row, freshly read."""
+    db.session.commit()  # the test is the boundary: its commit sends the job
 
     def final() -> Job | None:
         db.session.expire_all()

@@ -12,6 +12,7 @@ import pytest
 from flask import Flask
 from sqlalchemy import text
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.errors import InvalidInput
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext
@@ -69,7 +70,7 @@ def test_provider_settings_are_checked_and_stored_encrypted(app: Flask) -> None:
 
 
 def test_ec2_network_machines_and_terminate(app: Flask, ec2: None) -> None:
-    constellation, launch_job = service.launch(None, name="cloud7", kind="vrc", provider="ec2")
+    constellation, launch_job = service.launch(SYSTEM, name="cloud7", kind="vrc", provider="ec2")
     kind = load_kind("vrc")
     provider = open_provider("ec2", app.config["CLOUDSIM"])
     ctx = JobContext(launch_job)
@@ -88,8 +89,9 @@ def test_ec2_network_machines_and_terminate(app: Flask, ec2: None) -> None:
     assert sorted(n.id for n in again) == sorted(n.id for n in nodes)
     assert len(provider.nodes("cloud7")) == 4
 
-    terminate = service.terminate(None, constellation.id)
+    terminate = service.terminate(SYSTEM, constellation.id)
     terminate_constellation(JobContext(db.session.get(Job, terminate.id)))  # type: ignore[arg-type]
+    db.session.commit()  # as the runner does when the body returns
     db.session.refresh(constellation)
     assert constellation.state == ConstellationState.TERMINATED
     assert provider.nodes("cloud7") == []

@@ -9,6 +9,7 @@ import zipfile
 
 from flask import Flask
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service
@@ -20,14 +21,14 @@ from tests.launched_constellations.conftest import finished, leftovers
 def test_cloudsim_kind_serves_its_own_cloudsim(
     constellations_app: Flask, constellations_worker: None, constellations_config: Config
 ) -> None:
-    constellation, job = service.launch(None, name="teamsim", kind="cloudsim", provider="local")
+    constellation, job = service.launch(SYSTEM, name="teamsim", kind="cloudsim", provider="local")
     done = finished(job.id)
     assert done.state == JobState.SUCCEEDED, f"{done.error}\n{done.log[-3000:]}"
     db.session.refresh(constellation)
     assert constellation.state == ConstellationState.READY
     server = constellation.machines[0]
     assert [c["ok"] for c in server.verification["checks"]] == [True, True]
-    _, bundle = service.ssh_bundle(None, constellation.id)
+    _, bundle = service.ssh_bundle(SYSTEM, constellation.id)
     admin = zipfile.ZipFile(io.BytesIO(bundle)).read("cloudsim-admin.txt").decode()
     password = re.search(r"password: (\S+)", admin).group(1)  # type: ignore[union-attr]
     assert password not in done.log  # the job log masks it
@@ -37,7 +38,7 @@ def test_cloudsim_kind_serves_its_own_cloudsim(
     assert argv is not None
     answer = _http_get(argv, "/login")
     assert answer.startswith(b"HTTP/1.0 200") and b"Log in" in answer
-    finished(service.terminate(None, constellation.id).id)
+    finished(service.terminate(SYSTEM, constellation.id).id)
     assert leftovers(constellations_config) == {"netns": [], "mounts": [], "files": []}
 
 

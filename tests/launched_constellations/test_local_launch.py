@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 from flask import Flask
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.errors import Conflict
 from cloudsim.extensions import db
@@ -17,7 +18,8 @@ def test_two_vrc_constellations_launch_verify_and_terminate_cleanly(
     constellations_app: Flask, constellations_worker: None, constellations_config: Config
 ) -> None:
     launched = [
-        service.launch(None, name=name, kind="vrc", provider="local") for name in ("alpha", "bravo")
+        service.launch(SYSTEM, name=name, kind="vrc", provider="local")
+        for name in ("alpha", "bravo")
     ]
     for _, job in launched:
         done = finished(job.id)
@@ -39,7 +41,7 @@ def test_two_vrc_constellations_launch_verify_and_terminate_cleanly(
         assert machines["sim"].verification["simulator"]["ok"]
     assert len(subnets) == 2
 
-    jobs = [service.terminate(None, constellation.id) for constellation, _ in launched]
+    jobs = [service.terminate(SYSTEM, constellation.id) for constellation, _ in launched]
     for job in jobs:
         assert finished(job.id).state == JobState.SUCCEEDED
     assert leftovers(constellations_config) == {"netns": [], "mounts": [], "files": []}
@@ -47,4 +49,4 @@ def test_two_vrc_constellations_launch_verify_and_terminate_cleanly(
         db.session.refresh(constellation)
         assert constellation.state == ConstellationState.TERMINATED
         with pytest.raises(Conflict, match="already terminated"):
-            service.terminate(None, constellation.id)
+            service.terminate(SYSTEM, constellation.id)

@@ -8,6 +8,7 @@ import pytest
 from celery.contrib.testing.worker import start_worker
 from flask import Flask
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.jobs.service import sweep_jobs
@@ -24,7 +25,7 @@ def test_launch_resumes_after_the_worker_is_killed_mid_machines(
 ) -> None:
     process = worker_process(constellations_config, pytestconfig.rootpath)
     try:
-        constellation, job = service.launch(None, name="resume", kind="vrc", provider="local")
+        constellation, job = service.launch(SYSTEM, name="resume", kind="vrc", provider="local")
 
         def creating() -> bool:
             db.session.expire_all()
@@ -56,5 +57,5 @@ def test_launch_resumes_after_the_worker_is_killed_mid_machines(
             "router",
             "sim",
         ]
-        finished(service.terminate(None, constellation.id).id)
+        finished(service.terminate(SYSTEM, constellation.id).id)
     assert leftovers(constellations_config) == {"netns": [], "mounts": [], "files": []}

@@ -10,6 +10,7 @@ import zipfile
 from flask import Flask
 from libcloud.compute.base import NodeAuthSSHKey
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service
@@ -59,10 +60,10 @@ def _download(app: Flask, user: User, constellation_id: int) -> str:
 def test_bundle_connects_the_ocu_with_delay_and_revocation_cuts_it_off(
     constellations_app: Flask, constellations_worker: None, constellations_config: Config
 ) -> None:
-    team = create_team(None, "Rovers")
+    team = create_team(SYSTEM, "Rovers")
     pilot = make_user(Role.USER, team)
     constellation, job = service.launch(
-        None, name="vpnteam", kind="vrc", provider="local", team_id=team.id
+        SYSTEM, name="vpnteam", kind="vrc", provider="local", team_id=team.id
     )
     done = finished(job.id)
     assert done.state == JobState.SUCCEEDED, f"{done.error}\n{done.log[-3000:]}"
@@ -84,7 +85,7 @@ def test_bundle_connects_the_ocu_with_delay_and_revocation_cuts_it_off(
         rtt = float(re.search(r"time=([\d.]+) ms", str(reply)).group(1))  # type: ignore[union-attr]
         assert rtt >= 400  # 250 ms each way, added by the router's csrouter
 
-        update_user(None, pilot.id, active=False)  # off the team: revoked, CRL pushed
+        update_user(SYSTEM, pilot.id, active=False)  # off the team: revoked, CRL pushed
         refresh = wait_for(lambda: _refresh_job(constellation.id), 30, "the VPN refresh job")
         assert finished(refresh).state == JobState.SUCCEEDED
 

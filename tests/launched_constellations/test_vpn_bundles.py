@@ -9,6 +9,7 @@ import pytest
 from flask import Flask
 from sqlalchemy import select
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.errors import NotFound
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import vpn
@@ -93,7 +94,7 @@ def test_removing_a_user_revokes_their_certificate_and_updates_the_router(
     serial = vpn.client_certificate(ready_vrc, user)["serial"]  # type: ignore[arg-type]
     before = vpn.server_material(ready_vrc).crl
     assert vpn.server_material(ready_vrc).crl == before  # unchanged: no needless VPN restart
-    delete_user(None, user.id)  # type: ignore[union-attr]
+    delete_user(SYSTEM, user.id)  # type: ignore[union-attr]
     after = vpn.server_material(ready_vrc)
     ca = pki.CertificateAuthority(after.ca_cert, vpn._ca(ready_vrc).key_pem)
     assert serial in pki.revoked_serials(after.crl, ca)

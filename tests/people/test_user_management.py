@@ -8,6 +8,7 @@ import pytest
 from flask import Flask
 from sqlalchemy import select
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.errors import Conflict
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import vpn
@@ -125,9 +126,9 @@ def test_nobody_demotes_disables_or_deletes_the_last_admin(
     )
     assert demoted.status_code == 200, demoted.get_data(as_text=True)
     for change in (
-        lambda: update_user(None, admin.id, role="officer"),
-        lambda: update_user(None, admin.id, active=False),
-        lambda: delete_user(None, admin.id),
+        lambda: update_user(SYSTEM, admin.id, role="officer"),
+        lambda: update_user(SYSTEM, admin.id, active=False),
+        lambda: delete_user(SYSTEM, admin.id),
     ):
         with pytest.raises(Conflict, match="at least one active admin"):
             change()

@@ -1,4 +1,4 @@
-"""Job kinds that exist only in tests: one that fails, one that is slow enough to interrupt."""
+"""Job kinds that exist only in tests: failing, slow enough to interrupt, failing half-way."""
 
 from __future__ import annotations
 
@@ -7,7 +7,9 @@ import time
 from pathlib import Path
 
 from cloudsim.errors import CloudSimError
+from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
+from cloudsim.models import Team
 
 SECRET = "s3cr3t-cloud-key-AKIAEXAMPLE"
 
@@ -30,3 +32,14 @@ def slow_job(ctx: JobContext) -> None:
     for step in range(steps):
         ctx.stage(f"step {step + 1} of {steps}", int(100 * step / steps))
         time.sleep(float(ctx.job.params.get("seconds", 0.5)))
+
+
+@job_kind("test.half_done")
+def half_done_job(ctx: JobContext) -> None:
+    """Change the domain, report progress and log, then fail: the change must not survive."""
+    db.session.add(Team(name=str(ctx.job.params["team"])))
+    db.session.flush()
+    ctx.stage("changing things", 50)
+    ctx.log("made a team")
+    ctx.progress(60)
+    raise CloudSimError("failed half-way")

@@ -9,6 +9,7 @@ import pytest
 from flask import Flask
 from flask.testing import FlaskClient
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
@@ -83,7 +84,7 @@ def test_live_viewers_are_throttled_capped_and_share_one_relay(
 ) -> None:
     config = make_config(viewer_max_live=2, viewer_poll_ms=60_000)
     with running_app(config) as app:
-        team = service.create_team(None, "Team A")
+        team = service.create_team(SYSTEM, "Team A")
         officers = [make_user(Role.OFFICER) for _ in range(2)]
         run = store_run(team, run_logs, RunState.RUNNING)
         first, second = (_client(app, officer) for officer in officers)

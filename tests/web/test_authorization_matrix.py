@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 from flask import Flask
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.auth.tokens import issue_token
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
@@ -221,7 +222,7 @@ def test_route_answers_match_the_matrix(
 ) -> None:
     app.config["WTF_CSRF_ENABLED"] = False
     team_a = people["user_a"].team  # type: ignore[union-attr]
-    job_id = enqueue("diagnostics", None, team_id=team_a.id).id
+    job_id = enqueue("diagnostics", SYSTEM, team_id=team_a.id).id
     constellation = Constellation(
         name="team-a-vrc",
         kind="vrc",

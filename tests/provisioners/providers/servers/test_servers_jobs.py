@@ -6,6 +6,7 @@ from pathlib import Path
 
 from flask import Flask
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.jobs.runner import JobContext
 from cloudsim.launched_constellations import service
 from cloudsim.launched_constellations.connect import (
@@ -37,7 +38,7 @@ def test_a_simple_constellation_runs_on_a_server_and_leaves_nothing_behind(
     login = (server.private_ips[0], server.extra["ssh_proxy_command"], lab.login)
     before = ssh.check(*login, ORIGINALS)
     # The row names a provider the app knows; the stages get the servers provider itself.
-    constellation, job = service.launch(None, name="srv-simple", kind="simple", provider="local")
+    constellation, job = service.launch(SYSTEM, name="srv-simple", kind="simple", provider="local")
     kind = load_kind("simple")
     driver = ServersNodeDriver(inventory=lab.inventory(), state_dir=str(state_dir))
     provider = Provider("servers", driver)
