@@ -9,7 +9,7 @@ import re
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import pytest
 import redis
@@ -29,6 +29,7 @@ from tests.support.servers import MotoEndpoint, PostgresServer, RedisServer
 
 PASSWORD = "correct horse battery"
 _names = itertools.count(1)
+T = TypeVar("T")
 
 
 @pytest.fixture(scope="session")
@@ -135,20 +136,28 @@ def any_db_app(
 
 @pytest.fixture
 def team_a(app: Flask) -> Team:
-    return service.create_team(SYSTEM, "Team A")
+    return _committed(service.create_team(SYSTEM, "Team A"))
 
 
 @pytest.fixture
 def team_b(app: Flask) -> Team:
-    return service.create_team(SYSTEM, "Team B")
+    return _committed(service.create_team(SYSTEM, "Team B"))
+
+
+def _committed(row: T) -> T:
+    """Commit the test's setup, as the request or command that made it would."""
+    db.session.commit()
+    return row
 
 
 def make_user(role: Role, team: Team | None = None, email: str | None = None) -> User:
     """Create a user with the shared test password."""
     email = email or f"{role.value}{next(_names)}@example.org"
-    return service.create_user(
-        SYSTEM, email=email, role=role, team_id=team.id if team else None, password=PASSWORD
-    ).user
+    return _committed(
+        service.create_user(
+            SYSTEM, email=email, role=role, team_id=team.id if team else None, password=PASSWORD
+        ).user
+    )
 
 
 @pytest.fixture
