@@ -21,7 +21,6 @@ from drcsim.rundir import FINAL, SCORE, read_score_log, serve_argv
 from flask import current_app
 from sqlalchemy import select
 
-from cloudsim.auth.policy import SYSTEM
 from cloudsim.competition.artifacts import (
     LogStore,
     artifact_for,
@@ -29,12 +28,11 @@ from cloudsim.competition.artifacts import (
     run_dir,
     snapshot_bandwidth_log,
 )
-from cloudsim.competition.runs import request_stop
+from cloudsim.competition.runs import enqueue_stop, request_stop
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError, NotFound
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
-from cloudsim.jobs.service import enqueue
 from cloudsim.launched_constellations import router_control
 from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair
@@ -174,7 +172,7 @@ def start_run_job(ctx: JobContext) -> None:
         run.stop_reason = run.stop_reason or "error"
         run.state = RunState.STOPPING
         ctx.log(f"start failed ({exc}); stopping what was started")
-        _enqueue_stop(run)
+        enqueue_stop(run)
         ctx.checkpoint()  # the stopping state and the stop job survive this job's failure
         raise RunError(run.error) from exc
     run.state = RunState.RUNNING
@@ -199,10 +197,6 @@ def _start_simulator(reach: Machines, run: Run) -> None:
     reach.executor.run(
         reach.sim, simulator_command(run, reach.sim_ip, _allowed_networks(run)), timeout=60
     )
-
-
-def _enqueue_stop(run: Run) -> None:
-    enqueue("run.stop", SYSTEM, target_type="run", target_id=run.id, team_id=run.team_id)
 
 
 @job_kind("run.stop")
@@ -337,7 +331,7 @@ def _retry_failed_stops() -> int:
         )
         if jobs and jobs[0].state == JobState.FAILED and len(jobs) < MAX_STOP_ATTEMPTS:
             log.warning("run %s: stop job failed (%s); starting it again", run.id, jobs[0].error)
-            _enqueue_stop(run)
+            enqueue_stop(run)
             retried += 1
     return retried
 

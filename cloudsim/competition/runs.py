@@ -137,7 +137,7 @@ def request_stop(run: Run, reason: str) -> bool:
     db.session.refresh(run)
     if moved.rowcount != 1:  # type: ignore[attr-defined]
         return False
-    enqueue("run.stop", SYSTEM, target_type="run", target_id=run.id, team_id=run.team_id)
+    enqueue_stop(run)
     return True
 
 
@@ -208,3 +208,8 @@ def leaderboard(actor: Actor) -> list[Standing]:
         assert actor is not None
         standings = [s for s in standings if s.team_id == actor.team_id]
     return standings
+
+
+def enqueue_stop(run: Run) -> None:
+    """Start the job that stops a run: the one place it is started from."""
+    enqueue("run.stop", SYSTEM, target_type="run", target_id=run.id, team_id=run.team_id)

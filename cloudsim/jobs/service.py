@@ -78,6 +78,24 @@ def _forget_rolled_back(session: Session) -> None:
     session.info.pop(UNSENT, None)
 
 
+def workers_alive() -> bool:
+    """Return whether any Celery worker answers a ping within a second."""
+    celery = current_app.extensions["celery"]
+    try:
+        return bool(celery.control.ping(timeout=1.0))
+    except (OperationalError, OSError):
+        return False
+
+
+def run_here(job_id: str) -> None:
+    """Run a sent job in this process (a command whose job no worker would take); a worker
+    that gets the message later finds the job done and skips it."""
+    try:
+        run_job(job_id)
+    except Exception:
+        log.info("job %s failed in-process", job_id, exc_info=True)
+
+
 def send(job: Job) -> bool:
     """Put the job's message on the queue; return False (and log) when the broker is down."""
     return send_id(job.id)

@@ -10,6 +10,7 @@ import click
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, commit, emit, reports_errors
 from cloudsim.extensions import db
+from cloudsim.jobs.service import run_here, workers_alive
 from cloudsim.launched_constellations import service
 from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair
@@ -47,7 +48,12 @@ def constellation_data(constellation: Constellation) -> dict[str, object]:
 
 
 def _wait(job_id: str, quiet: bool) -> Job:
-    """Follow a job to its end, with a progress bar on a terminal."""
+    """Follow a job to its end, with a progress bar on a terminal; run it here if no worker
+    is alive (after Ctrl-C on `cloudsim up`, nothing else would)."""
+    commit()  # the command's work so far: the job row exists and its message is sent
+    if not workers_alive():
+        click.echo("no worker is running: running the job in this process", err=True)
+        run_here(job_id)
     started = time.monotonic()
     hinted = False
     show = not quiet and sys.stderr.isatty()
@@ -112,7 +118,6 @@ def launch(
             SYSTEM, name=name, kind=kind, provider=provider, team_id=team_id
         )
         if wait:
-            commit()
             job = _wait(job.id, as_json)
             db.session.refresh(created)
         emit(
@@ -160,17 +165,23 @@ def show(name: str, as_json: bool) -> None:
 @constellation.command("terminate")
 @click.argument("name")
 @click.option("--wait", is_flag=True, help="Follow the termination to its end.")
+@click.option("--json", "as_json", is_flag=True, help="Print the constellation as JSON.")
 @reports_errors
-def terminate(name: str, wait: bool) -> None:
+def terminate(name: str, wait: bool, as_json: bool) -> None:
     """Terminate a constellation, releasing every resource it has."""
     with app_context():
-        job = service.terminate(SYSTEM, name)
+        found = service.get_constellation(SYSTEM, name)
+        job = service.terminate(SYSTEM, found.id)
         if wait:
-            commit()
-            job = _wait(job.id, False)
-            if job.state.value == "failed":
-                raise click.ClickException(f"terminate failed: {job.error}")
-        click.echo(f"{name}: {'terminated' if wait else 'terminating'} (job {job.id})")
+            job = _wait(job.id, as_json)
+            db.session.refresh(found)
+        emit(
+            constellation_data(found) | {"job": job.id},
+            as_json,
+            f"{found.name}: {found.state.value} (job {job.id})",
+        )
+        if wait and job.state.value == "failed":
+            raise click.ClickException(f"terminate failed: {job.error}")
 
 
 @constellation.command("orphans")
