@@ -26,6 +26,7 @@ def test_launch_resumes_after_the_worker_is_killed_mid_machines(
     process = worker_process(constellations_config, pytestconfig.rootpath)
     try:
         constellation, job = service.launch(SYSTEM, name="resume", kind="vrc", provider="local")
+        db.session.commit()  # the test is the boundary: its commit sends the launch job
 
         def creating() -> bool:
             db.session.expire_all()
