@@ -203,19 +203,24 @@ def parse_kind(data: Any, plans: set[str] | None = None) -> ConstellationKind:
     )
 
 
-def load_kind(
-    name: str, plans: set[str] | None = None, directory: Traversable = KINDS_DIR
-) -> ConstellationKind:
-    """Load and validate the kind called name from its YAML file."""
+def kind_data(name: str, directory: Traversable = KINDS_DIR) -> Any:
+    """Read the YAML data of the kind called name (not yet validated: see parse_kind)."""
     path = directory.joinpath(f"{name}.yaml")
     if not _NAME.match(name) or not path.is_file():
         known = ", ".join(available_kinds(directory))
         raise DefinitionError(f"unknown constellation kind {name!r} (known: {known})")
     try:
-        data = yaml.safe_load(path.read_text())
+        return yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
         raise DefinitionError(f"{path.name}: {exc}") from None
-    kind = parse_kind(data, plans)
+
+
+def load_kind(
+    name: str, plans: set[str] | None = None, directory: Traversable = KINDS_DIR
+) -> ConstellationKind:
+    """Load and validate the kind called name from its YAML file."""
+    path = directory.joinpath(f"{name}.yaml")
+    kind = parse_kind(kind_data(name, directory), plans)
     if kind.name != name:
         raise DefinitionError(f"{path.name}: name must be {name!r}, got {kind.name!r}")
     return kind

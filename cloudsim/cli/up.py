@@ -130,17 +130,17 @@ def _launch_demo(base_url: str) -> None:
         return
     with app_context():
         existing = db.session.scalar(
-            select(Constellation).where(Constellation.name == DEMO_CONSTELLATION)
+            select(Constellation).where(
+                Constellation.name == DEMO_CONSTELLATION,
+                Constellation.state != ConstellationState.TERMINATED,
+            )
         )
-        if existing is not None and existing.state != ConstellationState.TERMINATED:
+        if existing is not None:
             click.echo(
                 f"demo constellation: {base_url}constellations/{existing.id} "
                 f"({existing.state.value})"
             )
             return
-        if existing is not None:
-            db.session.delete(existing)
-            db.session.flush()  # its name is free for the new one
         team = db.session.scalar(select(Team).where(Team.name == DEMO_TEAM))
         team = team or create_team(SYSTEM, DEMO_TEAM)
         created, _ = launch(

@@ -28,11 +28,12 @@ from cloudsim.launched_constellations.keys import (
     KeyPair,
     constellation_keypair,
 )
+from cloudsim.launched_constellations.service import launched_kind
 from cloudsim.launched_constellations.software import Supply, supply_needs
 from cloudsim.launched_constellations.verify import verify_constellation
 from cloudsim.models import Constellation, ConstellationState, MachineState, Secret
 from cloudsim.providers.service import Provider, open_provider
-from constellations.definition import ConstellationKind, load_kind
+from constellations.definition import ConstellationKind
 from constellations.plans import PLANS, Action, Need, PlanContext, PlanItem, firewall, needs_of
 from provisioners.providers.base import CloudSimNodeDriver
 from provisioners.remote.operations import apply
@@ -61,7 +62,7 @@ def launch_constellation(ctx: JobContext) -> None:
     if constellation.state in (ConstellationState.TERMINATING, ConstellationState.TERMINATED):
         raise ProvisioningError(f"{constellation.name} is {constellation.state.value}")
     config: Config = current_app.config["CLOUDSIM"]
-    kind = load_kind(constellation.kind, set(PLANS))
+    kind = launched_kind(constellation)
     constellation.state, constellation.error = ConstellationState.LAUNCHING, None
     try:
         _launch(ctx, constellation, kind, config)
@@ -132,7 +133,7 @@ def refresh_vpn(ctx: JobContext) -> None:
         )
         return
     config: Config = current_app.config["CLOUDSIM"]
-    kind = load_kind(constellation.kind, set(PLANS))
+    kind = launched_kind(constellation)
     # the machines whose plans deploy the VPN, and just those plans
     routers = [m for m in kind.machines if Need.VPN in needs_of(m.plan)]
     keys = constellation_keypair(constellation)

@@ -17,7 +17,13 @@ from cloudsim.jobs.service import enqueue
 from cloudsim.launched_constellations.keys import constellation_keypair, instance_admin_password
 from cloudsim.models import Constellation, ConstellationState, Job, Machine, Role, Team
 from cloudsim.providers.service import PROVIDERS
-from constellations.definition import DefinitionError, load_kind
+from constellations.definition import (
+    ConstellationKind,
+    DefinitionError,
+    kind_data,
+    load_kind,
+    parse_kind,
+)
 from constellations.plans import PLANS
 from constellations.plans.roles import CLOUDSIM_ADMIN_EMAIL, CLOUDSIM_PORT
 
@@ -44,7 +50,13 @@ def get_constellation(actor: Actor, ref: int | str) -> Constellation:
     if isinstance(ref, int) or ref.isdigit():
         constellation = db.session.get(Constellation, int(ref))
     else:
-        constellation = db.session.scalar(select(Constellation).where(Constellation.name == ref))
+        # the live one of that name, else the latest terminated one (history)
+        constellation = db.session.scalar(
+            select(Constellation)
+            .where(Constellation.name == ref)
+            .order_by(Constellation.state == ConstellationState.TERMINATED, Constellation.id.desc())
+            .limit(1)
+        )
     if constellation is None:
         raise NotFound.of("constellation", ref)
     require_team_access(actor, constellation.team_id, "constellation", ref)
@@ -73,18 +85,23 @@ def launch(
             "not starting or ending with '-'"
         )
     try:
-        definition = load_kind(kind, set(PLANS))
+        data = kind_data(kind)
+        definition = parse_kind(data, set(PLANS))
     except DefinitionError as exc:
         raise InvalidInput(str(exc)) from None
     if provider not in PROVIDERS:
         raise InvalidInput(f"unknown provider {provider!r}; known: {', '.join(PROVIDERS)}")
     if team_id is not None and db.session.get(Team, team_id) is None:
         raise NotFound.of("team", team_id)
-    if db.session.scalar(select(Constellation.id).where(Constellation.name == name)):
+    live = select(Constellation.id).where(
+        Constellation.name == name, Constellation.state != ConstellationState.TERMINATED
+    )
+    if db.session.scalar(live):
         raise Conflict(f"a constellation named {name!r} already exists")
     constellation = Constellation(
         name=name,
         kind=kind,
+        definition=data,
         provider=provider,
         team_id=team_id,
         created_by_id=actor.id if actor else None,
@@ -203,3 +220,11 @@ def ssh_bundle(actor: Actor, ref: int | str) -> tuple[str, bytes]:
         team_id=constellation.team_id,
     )
     return f"{constellation.name}-ssh.zip", buffer.getvalue()
+
+
+def launched_kind(constellation: Constellation) -> ConstellationKind:
+    """Return the kind the constellation was launched as (stored at launch; rows from before
+    that was stored are read from the kind's file)."""
+    if constellation.definition is not None:
+        return parse_kind(constellation.definition, set(PLANS))
+    return load_kind(constellation.kind, set(PLANS))

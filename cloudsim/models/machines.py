@@ -6,7 +6,7 @@ import enum
 from datetime import datetime
 from typing import TYPE_CHECKING, Any
 
-from sqlalchemy import JSON, ForeignKey, String, Text, UniqueConstraint
+from sqlalchemy import JSON, ForeignKey, Index, String, Text, UniqueConstraint, text
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from cloudsim.models.base import Base, UTCDateTime, str_enum, utcnow
@@ -38,14 +38,33 @@ class MachineState(enum.StrEnum):
     TERMINATED = "terminated"
 
 
+LIVE_NAME = "state != 'terminated'"
+
+
 class Constellation(Base):
-    """A named set of machines of one kind, on one provider, usually for one team."""
+    """A named set of machines of one kind, on one provider, usually for one team.
+
+    A name belongs to one live constellation at a time; terminated ones keep theirs, as
+    history, and the name can be launched again.
+    """
 
     __tablename__ = "constellations"
+    __table_args__ = (
+        Index(
+            "uq_constellations_live_name",
+            "name",
+            unique=True,
+            sqlite_where=text(LIVE_NAME),
+            postgresql_where=text(LIVE_NAME),
+        ),
+    )
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    name: Mapped[str] = mapped_column(String(63), unique=True)
+    name: Mapped[str] = mapped_column(String(63))
     kind: Mapped[str] = mapped_column(String(32))
+    # The kind's definition as it was at launch (its YAML data, validated): every job of this
+    # constellation works from it, whatever happens to the kind's file later.
+    definition: Mapped[dict[str, Any] | None] = mapped_column(JSON)
     provider: Mapped[str] = mapped_column(String(32))
     team_id: Mapped[int | None] = mapped_column(ForeignKey("teams.id"), index=True)
     state: Mapped[ConstellationState] = mapped_column(
