@@ -82,6 +82,20 @@ def _wait(job_id: str, quiet: bool) -> Job:
             time.sleep(0.5)
 
 
+def _follow(found: Constellation, job: Job, what: str, wait: bool, as_json: bool) -> None:
+    """Print the constellation and its job, after following the job to its end with --wait."""
+    if wait:
+        job = _wait(job.id, as_json)
+        db.session.refresh(found)
+    emit(
+        constellation_data(found) | {"job": job.id},
+        as_json,
+        f"{found.name}: {found.state.value} (job {job.id})",
+    )
+    if wait and job.state.value == "failed":
+        raise click.ClickException(f"{what} failed: {found.error or job.error}")
+
+
 class _NoBar:
     label = ""
 
@@ -117,16 +131,7 @@ def launch(
         created, job = service.launch(
             SYSTEM, name=name, kind=kind, provider=provider, team_id=team_id
         )
-        if wait:
-            job = _wait(job.id, as_json)
-            db.session.refresh(created)
-        emit(
-            constellation_data(created) | {"job": job.id},
-            as_json,
-            f"{created.name}: {created.state.value} (job {job.id})",
-        )
-        if wait and job.state.value == "failed":
-            raise click.ClickException(f"launch failed: {created.error or job.error}")
+        _follow(created, job, "launch", wait, as_json)
 
 
 @constellation.command("list")
@@ -171,17 +176,7 @@ def terminate(name: str, wait: bool, as_json: bool) -> None:
     """Terminate a constellation, releasing every resource it has."""
     with app_context():
         found = service.get_constellation(SYSTEM, name)
-        job = service.terminate(SYSTEM, found.id)
-        if wait:
-            job = _wait(job.id, as_json)
-            db.session.refresh(found)
-        emit(
-            constellation_data(found) | {"job": job.id},
-            as_json,
-            f"{found.name}: {found.state.value} (job {job.id})",
-        )
-        if wait and job.state.value == "failed":
-            raise click.ClickException(f"terminate failed: {job.error}")
+        _follow(found, service.terminate(SYSTEM, found.id), "terminate", wait, as_json)
 
 
 @constellation.command("orphans")

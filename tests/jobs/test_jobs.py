@@ -20,7 +20,7 @@ from cloudsim.models import Job, JobState, Team, User, utcnow
 from tests.conftest import log_in, running_app
 from tests.support import job_kinds
 from tests.support.servers import wait_for
-from tests.support.workers import kill_worker, worker_process
+from tests.support.workers import job_finished, kill_worker, worker_process
 
 
 @pytest.fixture
@@ -45,14 +45,7 @@ def worker(app: Flask) -> Iterator[None]:
 
 def finished(job_id: str, timeout: float = 30) -> Job:
     """Wait for a job to reach a final state and return its row, freshly read."""
-    db.session.commit()  # the test is the boundary: its commit sends the job
-
-    def final() -> Job | None:
-        db.session.expire_all()
-        job = db.session.get(Job, job_id)
-        return job if job is not None and job.state.final else None
-
-    return wait_for(final, timeout, f"job {job_id} to finish")  # type: ignore[return-value]
+    return job_finished(job_id, timeout)
 
 
 def test_diagnostics_job_runs_on_the_worker(app: Flask, worker: None) -> None:

@@ -12,11 +12,10 @@ from celery.contrib.testing.worker import start_worker
 from flask import Flask
 
 from cloudsim.config import Config
-from cloudsim.extensions import db
 from cloudsim.models import Job
 from cloudsim.providers.service import open_provider
 from tests.conftest import running_app
-from tests.support.servers import wait_for
+from tests.support.workers import job_finished
 
 PREFIX = f"cf{os.getpid() % 100000}"
 
@@ -62,15 +61,8 @@ def constellations_worker(constellations_app: Flask) -> Iterator[None]:
 
 
 def finished(job_id: str, timeout: float = 600) -> Job:
-    """Wait for a job to reach a final state and return its row, freshly read."""
-    db.session.commit()  # the test is the boundary: its commit sends the job
-
-    def final() -> Job | None:
-        db.session.expire_all()
-        job = db.session.get(Job, job_id)
-        return job if job is not None and job.state.final else None
-
-    return wait_for(final, timeout, f"job {job_id}")  # type: ignore[return-value]
+    """Wait (long: machines are made) for a job to reach a final state; return its row."""
+    return job_finished(job_id, timeout)
 
 
 def leftovers(config: Config) -> dict[str, list[str]]:

@@ -9,6 +9,9 @@ import sys
 from pathlib import Path
 
 from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.models import Job
+from tests.support.servers import wait_for
 
 
 def worker_process(config: Config, root: Path) -> subprocess.Popen[bytes]:
@@ -58,3 +61,15 @@ def kill_worker(process: subprocess.Popen[bytes]) -> None:
     for pid in [process.pid, *map(int, children)]:
         os.kill(pid, signal.SIGKILL)
     process.wait()
+
+
+def job_finished(job_id: str, timeout: float) -> Job:
+    """Commit the test's work (so its jobs are sent), wait for a job to end; return its row."""
+    db.session.commit()  # the test is the boundary: its commit sends the job
+
+    def final() -> Job | None:
+        db.session.expire_all()
+        job = db.session.get(Job, job_id)
+        return job if job is not None and job.state.final else None
+
+    return wait_for(final, timeout, f"job {job_id} to finish")  # type: ignore[return-value]
