@@ -34,7 +34,10 @@ def run_one(
             except ClientError as exc:  # the controller gave up (a refused command)
                 note, score = str(exc), {}
             if not score.get("ended"):
-                client.stop()
+                try:
+                    client.stop()
+                except ClientError:
+                    pass  # it ended (falls, time limit) after the controller's last look
                 score = dict(client.state()["score"])
     finally:
         if process.poll() is None:
