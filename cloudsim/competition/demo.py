@@ -21,7 +21,6 @@ from cloudsim.competition.jobs import DRCSIM, RunError, machines
 from cloudsim.competition.runs import start_run
 from cloudsim.competition.schedule import TaskSpec, schedule
 from cloudsim.config import Config
-from cloudsim.errors import NotFound
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.jobs.service import enqueue
@@ -61,9 +60,7 @@ def schedule_demo(team_id: int, constellation_id: int) -> Job:
 @job_kind("competition.demo")
 def run_demo(ctx: JobContext) -> None:
     """Wait for the constellation, start the demo run, start the example controller on fc1."""
-    task = db.session.get(Task, ctx.job.target_id)
-    if task is None:
-        raise NotFound(f"task {ctx.job.target_id} no longer exists")
+    task = ctx.target(Task)
     constellation_id = int(ctx.job.params["constellation_id"])
     ctx.stage("constellation", 10)
     _await(ctx, lambda: _ready(constellation_id), "the constellation to be ready")

@@ -30,7 +30,7 @@ from cloudsim.competition.artifacts import (
 )
 from cloudsim.competition.runs import enqueue_stop, request_stop
 from cloudsim.config import Config
-from cloudsim.errors import CloudSimError, NotFound
+from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.launched_constellations import router_control
@@ -108,10 +108,7 @@ def machines(
 
 
 def _run(ctx: JobContext) -> Run:
-    run = db.session.get(Run, ctx.job.target_id)
-    if run is None:
-        raise NotFound(f"run {ctx.job.target_id} no longer exists")
-    return run
+    return ctx.target(Run)
 
 
 def simulator_command(run: Run, sim_ip: str, allow: list[str]) -> str:

@@ -7,6 +7,7 @@ import threading
 import traceback
 from collections.abc import Callable, Iterable
 from datetime import timedelta
+from typing import TypeVar
 
 from celery import shared_task
 from flask import current_app
@@ -14,13 +15,14 @@ from sqlalchemy import Update, event, func, or_, update
 from sqlalchemy.orm import ORMExecuteState, Session
 from sqlalchemy.orm.attributes import set_committed_value
 
-from cloudsim.errors import CloudSimError
+from cloudsim.errors import CloudSimError, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Job, JobState, utcnow
 
 log = logging.getLogger(__name__)
 
 JobFunction = Callable[["JobContext"], None]
+T = TypeVar("T")
 JOB_KINDS: dict[str, JobFunction] = {}
 # Kinds an admin may start by name (the API's POST /jobs); every other kind is started by the
 # service that owns its rules (launching, runs, ...), never directly.
@@ -61,6 +63,15 @@ class JobContext:
         self._session = db.session()  # the body's session, also seen from its worker threads
         self._pending: list[tuple[dict[str, object], str]] = []
         self._lock = threading.Lock()
+
+    def target(self, model: type[T]) -> T:
+        """Return the row the job works on, of the type its kind expects; fail loudly when the
+        row is gone (a job takes an id and reloads its row, never an object)."""
+        row = db.session.get(model, self.job.target_id)
+        if row is None:
+            noun = getattr(model, "__tablename__", model.__name__).rstrip("s")
+            raise NotFound(f"{noun} {self.job.target_id} no longer exists")
+        return row
 
     def mask(self, *secrets: str) -> None:
         """Never show these strings in the job's log or error."""

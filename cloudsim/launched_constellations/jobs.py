@@ -16,7 +16,7 @@ from libcloud.compute.base import Node, NodeAuthSSHKey
 from libcloud.compute.types import NodeState
 
 from cloudsim.config import Config
-from cloudsim.errors import CloudSimError, NotFound
+from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.launched_constellations.connect import (
@@ -49,10 +49,7 @@ class ProvisioningError(CloudSimError):
 
 
 def _constellation(ctx: JobContext) -> Constellation:
-    constellation = db.session.get(Constellation, ctx.job.target_id)
-    if constellation is None:
-        raise NotFound(f"constellation {ctx.job.target_id} no longer exists")
-    return constellation
+    return ctx.target(Constellation)
 
 
 @job_kind("constellation.launch")

@@ -81,6 +81,12 @@ def test_reports_never_commit_a_failing_job_body_s_changes(app: Flask, worker: N
     assert db.session.scalar(select(Team).where(Team.name == "half-done")) is None
 
 
+def test_a_job_whose_row_is_gone_fails_naming_it(app: Flask, worker: None) -> None:
+    job = enqueue("constellation.terminate", SYSTEM, target_type="constellation", target_id=4242)
+    ended = finished(job.id)
+    assert ended.state == JobState.FAILED and ended.error == "constellation 4242 no longer exists"
+
+
 def test_a_second_delivery_of_a_finished_job_does_nothing(app: Flask, worker: None) -> None:
     job = finished(enqueue("diagnostics", SYSTEM).id)
     log_before = job.log
