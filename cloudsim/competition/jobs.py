@@ -21,6 +21,7 @@ from drcsim.rundir import FINAL, SCORE, read_score_log, serve_argv
 from flask import current_app
 from sqlalchemy import select
 
+from cloudsim.competition import lifecycle
 from cloudsim.competition.artifacts import (
     LogStore,
     artifact_for,
@@ -28,7 +29,6 @@ from cloudsim.competition.artifacts import (
     run_dir,
     snapshot_bandwidth_log,
 )
-from cloudsim.competition.runs import enqueue_stop, request_stop
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
@@ -165,18 +165,13 @@ def start_run_job(ctx: JobContext) -> None:
     except (CloudSimError, SSHError, ValueError) as exc:
         db.session.rollback()
         run = _run(ctx)
-        run.error = f"starting failed at the {ctx.job.stage} stage: {exc}"
-        run.stop_reason = run.stop_reason or "error"
-        run.state = RunState.STOPPING
+        lifecycle.start_failed(run, f"starting failed at the {ctx.job.stage} stage: {exc}")
         ctx.log(f"start failed ({exc}); stopping what was started")
-        enqueue_stop(run)
         ctx.checkpoint()  # the stopping state and the stop job survive this job's failure
         raise RunError(run.error) from exc
-    run.state = RunState.RUNNING
-    run.running_at = utcnow()
+    lifecycle.running(run)
     ctx.stage("running", 100)
-    if run.stop_reason is not None:  # stopped while it was starting
-        request_stop(run, run.stop_reason)
+    lifecycle.stop_requested_while_starting(run)
 
 
 def _start_simulator(reach: Machines, run: Run) -> None:
@@ -203,7 +198,7 @@ def stop_run_job(ctx: JobContext) -> None:
     if run.state in (RunState.FINISHED, RunState.ERROR):
         ctx.log(f"run {run.id} is {run.state.value} already")
         return
-    run.state = RunState.STOPPING
+    lifecycle.stopping(run)
     ctx.checkpoint()
     config: Config = current_app.config["CLOUDSIM"]
     # A router fault seen during the run is kept on the record; it does not fail the run.
@@ -218,11 +213,8 @@ def stop_run_job(ctx: JobContext) -> None:
     ctx.stage("score", 90)
     score_run(run, store)
     run = _run(ctx)
-    run.error = "; ".join([*problems, *([router_note] if router_note else [])])[:4000] or None
-    run.state = RunState.ERROR if problems else RunState.FINISHED
-    run.end_reason = run.end_reason or run.stop_reason
-    run.finished_at = utcnow()
-    run.active_constellation_id = None
+    error = "; ".join([*problems, *([router_note] if router_note else [])])[:4000] or None
+    lifecycle.ended(run, error, failed=bool(problems))
     ctx.log(f"run {run.id} {run.state.value}: {run.score} checkpoint(s), ended by {run.end_reason}")
 
 
@@ -311,7 +303,7 @@ def supervise_runs() -> int:
                 log.warning("run %s: cannot check the simulator: %s", run.id, exc)
                 continue
         if reason is not None:
-            stopped += request_stop(run, reason)
+            stopped += lifecycle.request_stop(run, reason)
     return stopped + _retry_failed_stops()
 
 
@@ -328,7 +320,7 @@ def _retry_failed_stops() -> int:
         )
         if jobs and jobs[0].state == JobState.FAILED and len(jobs) < MAX_STOP_ATTEMPTS:
             log.warning("run %s: stop job failed (%s); starting it again", run.id, jobs[0].error)
-            enqueue_stop(run)
+            lifecycle.enqueue_stop(run)
             retried += 1
     return retried
 

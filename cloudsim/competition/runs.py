@@ -5,16 +5,16 @@ from __future__ import annotations
 from collections import defaultdict
 
 from flask import current_app
-from sqlalchemy import Select, select, update
+from sqlalchemy import Select, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import selectinload
 
 from cloudsim.audit.service import record
-from cloudsim.auth.policy import SYSTEM, Actor, require_team_access
+from cloudsim.auth.policy import Actor, require_team_access
+from cloudsim.competition import lifecycle
 from cloudsim.competition.scoring import RunResult, Standing, rank
 from cloudsim.errors import Conflict, Forbidden, NotFound
 from cloudsim.extensions import db
-from cloudsim.jobs.service import enqueue
 from cloudsim.models import (
     Artifact,
     Constellation,
@@ -53,13 +53,12 @@ def start_run(actor: Actor, task_id: int, constellation_id: int | None = None) -
     if done is not None:
         raise Conflict(f"{task.name} has been run already (run {done})")
     constellation = _constellation_for(task, constellation_id)
-    run = Run(
+    run = lifecycle.new_run(
         task_id=task.id,
         team_id=task.team_id,
         constellation_id=constellation.id,
         active_constellation_id=constellation.id,
         started_by_id=actor.id if actor else None,
-        state=RunState.STARTING,
     )
     db.session.add(run)
     try:
@@ -76,7 +75,7 @@ def start_run(actor: Actor, task_id: int, constellation_id: int | None = None) -
         task=task.name,
         constellation=constellation.name,
     )
-    enqueue("run.start", actor, target_type="run", target_id=run.id, team_id=run.team_id)
+    lifecycle.start(actor, run)
     return run
 
 
@@ -113,32 +112,8 @@ def stop_run(actor: Actor, run_id: int) -> Run:
         raise Conflict(f"run {run.id} is {run.state.value}")
     if run.stop_reason is None:
         record("run.stop", actor, target_type="run", target_id=run.id, team_id=run.team_id)
-    request_stop(run, "stopped")
+    lifecycle.request_stop(run, "stopped")
     return run
-
-
-def request_stop(run: Run, reason: str) -> bool:
-    """Record why a run ends and start its stop job once; return whether this call started it.
-
-    A run still starting is stopped by its start job when it gets there.
-    """
-    db.session.execute(
-        update(Run)
-        .where(Run.id == run.id, Run.stop_reason.is_(None))
-        .values(stop_reason=reason)
-        .execution_options(synchronize_session=False)
-    )
-    moved = db.session.execute(
-        update(Run)
-        .where(Run.id == run.id, Run.state == RunState.RUNNING)
-        .values(state=RunState.STOPPING)
-        .execution_options(synchronize_session=False)
-    )
-    db.session.refresh(run)
-    if moved.rowcount != 1:  # type: ignore[attr-defined]
-        return False
-    enqueue_stop(run)
-    return True
 
 
 def get_run(actor: Actor, run_id: int) -> Run:
@@ -208,8 +183,3 @@ def leaderboard(actor: Actor) -> list[Standing]:
         assert actor is not None
         standings = [s for s in standings if s.team_id == actor.team_id]
     return standings
-
-
-def enqueue_stop(run: Run) -> None:
-    """Start the job that stops a run: the one place it is started from."""
-    enqueue("run.stop", SYSTEM, target_type="run", target_id=run.id, team_id=run.team_id)

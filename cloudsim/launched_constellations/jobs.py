@@ -19,6 +19,7 @@ from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
+from cloudsim.launched_constellations import lifecycle
 from cloudsim.launched_constellations.connect import (
     machine_host_keys,
     record_routes,
@@ -31,7 +32,7 @@ from cloudsim.launched_constellations.keys import (
 from cloudsim.launched_constellations.service import launched_kind
 from cloudsim.launched_constellations.software import Supply, supply_needs
 from cloudsim.launched_constellations.verify import verify_constellation
-from cloudsim.models import Constellation, ConstellationState, MachineState, Secret
+from cloudsim.models import Constellation, ConstellationState, Secret
 from cloudsim.providers.service import Provider, open_provider
 from constellations.definition import ConstellationKind
 from constellations.plans import PLANS, Action, Need, PlanContext, PlanItem, firewall, needs_of
@@ -60,19 +61,16 @@ def launch_constellation(ctx: JobContext) -> None:
         raise ProvisioningError(f"{constellation.name} is {constellation.state.value}")
     config: Config = current_app.config["CLOUDSIM"]
     kind = launched_kind(constellation)
-    constellation.state, constellation.error = ConstellationState.LAUNCHING, None
+    lifecycle.launching(constellation)
     try:
         _launch(ctx, constellation, kind, config)
     except Exception as exc:
         db.session.rollback()
         constellation = _constellation(ctx)
-        constellation.state = ConstellationState.ERROR
-        constellation.error = ctx.masked(f"{ctx.job.stage}: {exc}")
+        lifecycle.failed(constellation, ctx.masked(f"{ctx.job.stage}: {exc}"))
         ctx.checkpoint()  # the error state survives the runner's rollback
         raise
-    constellation.state = ConstellationState.READY
-    for machine in constellation.machines:
-        machine.state = MachineState.READY
+    lifecycle.ready(constellation)
     ctx.stage("ready", 100)
 
 
@@ -204,7 +202,7 @@ def ensure_machines(
     missing = [m for m in wanted if m.name not in have]
     rows = {m.name: m for m in constellation.machines}
     for definition in missing:
-        rows[definition.name].state = MachineState.CREATING
+        lifecycle.machine_creating(rows[definition.name])
     ctx.checkpoint()
     image = provider.image()
     sizes = {m.name: provider.size(m.size) for m in missing}
@@ -237,7 +235,7 @@ def ensure_machines(
         row.public_ip = node.public_ips[0] if node.public_ips else None
         # Providers of existing machines (servers) decide the address; clouds honour ours.
         row.private_ip = node.private_ips[0] if node.private_ips else row.private_ip
-        row.state = MachineState.RUNNING
+        lifecycle.machine_running(row)
     ctx.checkpoint()
     return list(nodes.values())
 
@@ -304,13 +302,11 @@ def terminate_constellation(ctx: JobContext) -> None:
     """Release every resource of a constellation; safe to run again and again."""
     constellation = _constellation(ctx)
     config: Config = current_app.config["CLOUDSIM"]
-    constellation.state = ConstellationState.TERMINATING
+    lifecycle.terminating(constellation)
     ctx.stage("machines", 10)
     provider = open_provider(constellation.provider, config)
     driver = provider.driver
     nodes = provider.nodes(constellation.name)
-    for machine in constellation.machines:
-        machine.state = MachineState.TERMINATING
     ctx.checkpoint()
     _in_parallel(nodes, lambda node: driver.destroy_node(node), lambda node: node.name)
     ctx.log(f"destroyed {len(nodes)} machine(s)")
@@ -323,7 +319,5 @@ def terminate_constellation(ctx: JobContext) -> None:
     db.session.query(Secret).filter_by(
         owner_type="constellation", owner_id=constellation.id
     ).delete()
-    for machine in constellation.machines:
-        machine.state = MachineState.TERMINATED
-    constellation.state = ConstellationState.TERMINATED
+    lifecycle.terminated(constellation)
     ctx.stage("terminated", 100)

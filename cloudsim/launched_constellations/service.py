@@ -13,7 +13,7 @@ from cloudsim.audit.service import record
 from cloudsim.auth.policy import Actor, require_role, require_team_access
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.jobs.service import enqueue
+from cloudsim.launched_constellations import lifecycle
 from cloudsim.launched_constellations.keys import constellation_keypair, instance_admin_password
 from cloudsim.models import Constellation, ConstellationState, Job, Machine, Role, Team
 from cloudsim.providers.service import PROVIDERS
@@ -122,14 +122,7 @@ def launch(
         kind=kind,
         provider=provider,
     )
-    job = enqueue(
-        "constellation.launch",
-        actor,
-        target_type="constellation",
-        target_id=constellation.id,
-        team_id=team_id,
-    )
-    return constellation, job
+    return constellation, lifecycle.start_launch(actor, constellation)
 
 
 def retry(actor: Actor, ref: int | str) -> Job:
@@ -138,8 +131,8 @@ def retry(actor: Actor, ref: int | str) -> Job:
     constellation = get_constellation(actor, ref)
     if constellation.state != ConstellationState.ERROR:
         raise Conflict(f"{constellation.name} is {constellation.state.value}, not in error")
-    constellation.state = ConstellationState.PENDING
-    return _start_job(actor, constellation, "constellation.retry", "constellation.launch")
+    _audit("constellation.retry", actor, constellation)
+    return lifecycle.retry(actor, constellation)
 
 
 def terminate(actor: Actor, ref: int | str) -> Job:
@@ -155,21 +148,14 @@ def terminate(actor: Actor, ref: int | str) -> Job:
         and not running.state.final
     ):
         return running
-    constellation.state = ConstellationState.TERMINATING
-    return _start_job(actor, constellation, "constellation.terminate", "constellation.terminate")
+    _audit("constellation.terminate", actor, constellation)
+    return lifecycle.start_terminate(actor, constellation)
 
 
-def _start_job(actor: Actor, constellation: Constellation, action: str, kind: str) -> Job:
-    """Audit an action on a constellation and start the job that carries it out."""
+def _audit(action: str, actor: Actor, constellation: Constellation) -> None:
+    """Record an action on a constellation in the audit log."""
     record(
         action,
-        actor,
-        target_type="constellation",
-        target_id=constellation.id,
-        team_id=constellation.team_id,
-    )
-    return enqueue(
-        kind,
         actor,
         target_type="constellation",
         target_id=constellation.id,
@@ -212,13 +198,7 @@ def ssh_bundle(actor: Actor, ref: int | str) -> tuple[str, bytes]:
                     f"password: {instance_admin_password(constellation)}\n"
                 ),
             )
-    record(
-        "constellation.ssh_bundle",
-        actor,
-        target_type="constellation",
-        target_id=constellation.id,
-        team_id=constellation.team_id,
-    )
+    _audit("constellation.ssh_bundle", actor, constellation)
     return f"{constellation.name}-ssh.zip", buffer.getvalue()
 
 

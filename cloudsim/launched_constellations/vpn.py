@@ -201,13 +201,7 @@ def vpn_bundle(
 
 def revoke_and_push(user: User) -> None:
     """Revoke the user's VPN certificates and push the new revocation lists to the routers."""
-    from cloudsim.jobs.service import enqueue
+    from cloudsim.launched_constellations import lifecycle
 
     for constellation in revoke_user(user):
-        enqueue(
-            "constellation.refresh_vpn",
-            SYSTEM,
-            target_type="constellation",
-            target_id=constellation.id,
-            team_id=constellation.team_id,
-        )
+        lifecycle.start_refresh_vpn(SYSTEM, constellation)

@@ -1,0 +1,90 @@
+"""A run's life: the one place its state changes and the jobs each change starts are enqueued.
+
+starting -> running -> stopping -> finished | error; a start that fails goes to stopping.
+The service checks who may ask and what is allowed; the job bodies and the beat do the work;
+all of them call here to move the state.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import update
+
+from cloudsim.auth.policy import SYSTEM, Actor
+from cloudsim.extensions import db
+from cloudsim.jobs.service import enqueue
+from cloudsim.models import Run, RunState, utcnow
+
+
+def new_run(**fields: Any) -> Run:
+    """Return a new run, `starting`."""
+    return Run(**fields, state=RunState.STARTING)
+
+
+def start(actor: Actor, run: Run) -> None:
+    """Start the job that starts a new run."""
+    enqueue("run.start", actor, target_type="run", target_id=run.id, team_id=run.team_id)
+
+
+def enqueue_stop(run: Run) -> None:
+    """Start the job that stops a run: the one place it is started from."""
+    enqueue("run.stop", SYSTEM, target_type="run", target_id=run.id, team_id=run.team_id)
+
+
+def request_stop(run: Run, reason: str) -> bool:
+    """Record why a run ends and start its stop job once; return whether this call started it.
+
+    A run still starting is stopped by its start job when it gets there.
+    """
+    db.session.execute(
+        update(Run)
+        .where(Run.id == run.id, Run.stop_reason.is_(None))
+        .values(stop_reason=reason)
+        .execution_options(synchronize_session=False)
+    )
+    moved = db.session.execute(
+        update(Run)
+        .where(Run.id == run.id, Run.state == RunState.RUNNING)
+        .values(state=RunState.STOPPING)
+        .execution_options(synchronize_session=False)
+    )
+    db.session.refresh(run)
+    if moved.rowcount != 1:  # type: ignore[attr-defined]
+        return False
+    enqueue_stop(run)
+    return True
+
+
+def start_failed(run: Run, error: str) -> None:
+    """Record why a run could not start and start stopping what was started."""
+    run.error = error
+    run.stop_reason = run.stop_reason or "error"
+    run.state = RunState.STOPPING
+    enqueue_stop(run)
+
+
+def running(run: Run) -> None:
+    """Mark a started run running."""
+    run.state = RunState.RUNNING
+    run.running_at = utcnow()
+
+
+def stop_requested_while_starting(run: Run) -> None:
+    """Stop a run that was asked to stop while it was starting (no-op otherwise)."""
+    if run.stop_reason is not None:
+        request_stop(run, run.stop_reason)
+
+
+def stopping(run: Run) -> None:
+    """Mark a run as being stopped by its stop job."""
+    run.state = RunState.STOPPING
+
+
+def ended(run: Run, error: str | None, failed: bool) -> None:
+    """Mark a stopped run finished (or error), freeing its constellation."""
+    run.error = error
+    run.state = RunState.ERROR if failed else RunState.FINISHED
+    run.end_reason = run.end_reason or run.stop_reason
+    run.finished_at = utcnow()
+    run.active_constellation_id = None

@@ -1,0 +1,88 @@
+"""A constellation's life: the one place its state (and its machines') changes and the jobs
+each change starts are enqueued.
+
+pending -> launching -> ready | error; error -> pending (retry); any -> terminating ->
+terminated. The service checks who may ask and what is allowed; the job bodies do the work;
+both call here to move the state.
+"""
+
+from __future__ import annotations
+
+from cloudsim.auth.policy import Actor
+from cloudsim.jobs.service import enqueue
+from cloudsim.models import Constellation, ConstellationState, Job, Machine, MachineState
+
+
+def _start_job(actor: Actor, constellation: Constellation, kind: str) -> Job:
+    """Enqueue a job about the constellation."""
+    return enqueue(
+        kind,
+        actor,
+        target_type="constellation",
+        target_id=constellation.id,
+        team_id=constellation.team_id,
+    )
+
+
+def start_launch(actor: Actor, constellation: Constellation) -> Job:
+    """Start the job that launches a constellation recorded as pending."""
+    return _start_job(actor, constellation, "constellation.launch")
+
+
+def retry(actor: Actor, constellation: Constellation) -> Job:
+    """Set a constellation in error back to pending and start its launch again."""
+    constellation.state = ConstellationState.PENDING
+    return start_launch(actor, constellation)
+
+
+def start_terminate(actor: Actor, constellation: Constellation) -> Job:
+    """Mark a constellation terminating and start the job that releases its resources."""
+    constellation.state = ConstellationState.TERMINATING
+    return _start_job(actor, constellation, "constellation.terminate")
+
+
+def start_refresh_vpn(actor: Actor, constellation: Constellation) -> Job:
+    """Start the job that pushes the VPN's current keys to the constellation's router."""
+    return _start_job(actor, constellation, "constellation.refresh_vpn")
+
+
+def launching(constellation: Constellation) -> None:
+    """Mark a constellation as being launched, clearing any earlier error."""
+    constellation.state, constellation.error = ConstellationState.LAUNCHING, None
+
+
+def failed(constellation: Constellation, error: str) -> None:
+    """Mark a constellation's launch as failed, with why."""
+    constellation.state = ConstellationState.ERROR
+    constellation.error = error
+
+
+def ready(constellation: Constellation) -> None:
+    """Mark a constellation and all its machines ready."""
+    constellation.state = ConstellationState.READY
+    for machine in constellation.machines:
+        machine.state = MachineState.READY
+
+
+def machine_creating(machine: Machine) -> None:
+    """Mark a machine as being created at the provider."""
+    machine.state = MachineState.CREATING
+
+
+def machine_running(machine: Machine) -> None:
+    """Mark a machine as running at the provider (not yet configured)."""
+    machine.state = MachineState.RUNNING
+
+
+def terminating(constellation: Constellation) -> None:
+    """Mark a constellation and all its machines as being terminated."""
+    constellation.state = ConstellationState.TERMINATING
+    for machine in constellation.machines:
+        machine.state = MachineState.TERMINATING
+
+
+def terminated(constellation: Constellation) -> None:
+    """Mark a constellation and all its machines terminated."""
+    for machine in constellation.machines:
+        machine.state = MachineState.TERMINATED
+    constellation.state = ConstellationState.TERMINATED
