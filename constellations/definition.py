@@ -11,10 +11,17 @@ from typing import Any
 
 import yaml
 
-from provisioners.remote.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule, check_role_name
+from provisioners.remote.firewall import (
+    SOURCE_ANY,
+    SOURCE_LAN,
+    SOURCE_PUBLIC,
+    FirewallRule,
+    check_role_name,
+)
 
 KINDS_DIR: Traversable = resources.files("constellations").joinpath("kinds")
 PUBLIC = "public"  # the outside world, in reachability checks
+VPN = "vpn"  # a client of the router's team VPN, in reachability checks
 _NAME = re.compile(r"[a-z][a-z0-9-]{0,30}\Z")
 
 
@@ -62,6 +69,7 @@ class ConstellationKind:
     machines: tuple[MachineDefinition, ...]
     firewall: tuple[FirewallRule, ...]
     reachability: tuple[Reachability, ...]
+    vpn_access: tuple[FirewallRule, ...] = ()  # what VPN clients reach (source: the VPN)
 
     def machine(self, name: str) -> MachineDefinition:
         """Return the machine called name."""
@@ -120,7 +128,7 @@ def _machine(data: Any, where: str, plans: set[str] | None) -> MachineDefinition
     )
 
 
-def _rule(data: Any, where: str, roles: set[str]) -> FirewallRule:
+def _rule(data: Any, where: str, roles: set[str], vpn: bool = False) -> FirewallRule:
     if not isinstance(data, dict):
         raise DefinitionError(f"{where} must be a mapping")
     ports = data.get("ports")
@@ -130,8 +138,10 @@ def _rule(data: Any, where: str, roles: set[str]) -> FirewallRule:
         ports = (ports[0], ports[1])
     elif ports is not None:
         raise DefinitionError(f"{where}.ports must be a port or [first, last], got {ports!r}")
-    source = _field(data, "from", where, str)
-    if source not in (SOURCE_ANY, SOURCE_LAN):
+    if vpn and "from" in data:
+        raise DefinitionError(f"{where}.from: the source of a vpn rule is the VPN")
+    source = SOURCE_ANY if vpn else _field(data, "from", where, str)
+    if source not in (SOURCE_ANY, SOURCE_LAN, SOURCE_PUBLIC):
         source = f"role:{source}"
     try:
         rule = FirewallRule(
@@ -153,8 +163,10 @@ def _reachability(data: Any, where: str, names: set[str], allowed: bool) -> Reac
         raise DefinitionError(f"{where} must be [source, target, port]")
     source, target, port = data
     for end in (source, target):
-        if end not in names | {PUBLIC}:
+        if end not in names | {PUBLIC, VPN}:
             raise DefinitionError(f"{where}: unknown machine {end!r}")
+    if target in (PUBLIC, VPN):
+        raise DefinitionError(f"{where}: the target must be a machine, got {target!r}")
     return Reachability(source, target, port, allowed)
 
 
@@ -186,6 +198,10 @@ def parse_kind(data: Any, plans: set[str] | None = None) -> ConstellationKind:
         _rule(r, f"{name}.firewall[{i}]", roles)
         for i, r in enumerate(_field(data, "firewall", name, list, []))
     )
+    vpn_access = tuple(
+        _rule(r, f"{name}.vpn[{i}]", roles, vpn=True)
+        for i, r in enumerate(_field(data, "vpn", name, list, []))
+    )
     checks = _field(data, "reachability", name, dict, {})
     reachability = tuple(
         _reachability(r, f"{name}.reachability.{key}[{i}]", set(names), key == "allow")
@@ -200,6 +216,7 @@ def parse_kind(data: Any, plans: set[str] | None = None) -> ConstellationKind:
         machines=machines,
         firewall=firewall,
         reachability=reachability,
+        vpn_access=vpn_access,
     )
 
 

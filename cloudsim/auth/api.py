@@ -10,8 +10,15 @@ from flask.views import MethodView
 
 from cloudsim.api import API_PREFIX, PUBLIC_PATHS
 from cloudsim.api.common import Blueprint, caller, columns
-from cloudsim.auth.schemas import IssuedTokenSchema, TokenSchema
+from cloudsim.auth import ssh_keys
+from cloudsim.auth.schemas import (
+    GeneratedSshKeySchema,
+    IssuedTokenSchema,
+    SshKeySchema,
+    TokenSchema,
+)
 from cloudsim.auth.tokens import issue_token, revoke_token, user_for_token
+from cloudsim.errors import InvalidInput
 from cloudsim.people.schemas import UserSchema
 
 blp = Blueprint("api_account", __name__, description="The caller's account and API tokens")
@@ -62,3 +69,35 @@ class TokenById(MethodView):
     def delete(self, token_id: int) -> None:
         """Revoke one of the caller's tokens."""
         revoke_token(caller(), token_id)
+
+
+@blp.route("/me/ssh-keys")
+class SshKeys(MethodView):
+    @blp.response(200, SshKeySchema(many=True))
+    def get(self) -> Any:
+        """List the caller's SSH public keys with their fingerprints."""
+        return ssh_keys.list_keys(caller())
+
+    @blp.arguments(SshKeySchema)
+    @blp.response(201, GeneratedSshKeySchema)
+    def post(self, data: dict[str, Any]) -> Any:
+        """Add a public key (`public_key`), or `generate` one: its private key is answered once.
+
+        The keys of a team's members log into `team` on its field computers within seconds.
+        """
+        if data["generate"]:
+            if data["public_key"]:
+                raise InvalidInput("give a public_key or ask to generate one, not both")
+            made = ssh_keys.generate_key(caller(), data["name"])
+            return {**columns(made.key), "private_key": made.private_key}
+        if not data["public_key"]:
+            raise InvalidInput("public_key is required (or generate: true)")
+        return ssh_keys.add_key(caller(), data["public_key"], data["name"])
+
+
+@blp.route("/me/ssh-keys/<int:key_id>")
+class SshKeyById(MethodView):
+    @blp.response(204)
+    def delete(self, key_id: int) -> None:
+        """Remove one of the caller's keys; it stops working on the field computers at once."""
+        ssh_keys.delete_key(caller(), key_id)

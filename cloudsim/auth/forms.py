@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from flask_wtf import FlaskForm
-from wtforms import PasswordField, StringField
+from wtforms import PasswordField, StringField, TextAreaField
 from wtforms.validators import DataRequired, EqualTo, Length
 
 
@@ -28,6 +28,15 @@ class TokenForm(FlaskForm):
     """Name a new API token."""
 
     name = StringField("Token name", validators=[DataRequired(), Length(max=80)])
+
+
+class SshKeyForm(FlaskForm):
+    """Add an SSH public key (or leave it empty and ask CloudSim to make one)."""
+
+    name = StringField("Key name (optional)", validators=[Length(max=80)])
+    public_key = TextAreaField(
+        "Public key (one line: ssh-ed25519 AAAA... you@laptop)", validators=[Length(max=16384)]
+    )
 
 
 class ConfirmForm(FlaskForm):

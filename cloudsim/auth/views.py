@@ -1,4 +1,4 @@
-"""Log in, log out, and one's own account (password, API tokens)."""
+"""Log in, log out, and one's own account (password, API tokens, SSH keys)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ from flask_login import current_user, login_required
 from sqlalchemy import select
 
 from cloudsim.audit.service import record
-from cloudsim.auth.forms import ConfirmForm, LoginForm, PasswordForm, TokenForm
+from cloudsim.auth import ssh_keys
+from cloudsim.auth.forms import ConfirmForm, LoginForm, PasswordForm, SshKeyForm, TokenForm
 from cloudsim.auth.passwords import verify_password
 from cloudsim.auth.service import change_own_password
 from cloudsim.auth.session import end_session, start_session
@@ -84,16 +85,25 @@ def logout() -> ResponseReturnValue:
     return redirect(url_for("auth.login"))
 
 
+def _account_page(status: int = 200, **forms: object) -> ResponseReturnValue:
+    """Render the account page; `forms` replaces the blank forms (with their errors) or adds
+    what is shown once (a new token, a generated private key)."""
+    context = {
+        "password_form": PasswordForm(),
+        "token_form": TokenForm(),
+        "ssh_form": SshKeyForm(),
+        "confirm": ConfirmForm(),
+        "new_token": None,
+        "new_private_key": None,
+        **forms,
+    }
+    return render_template("auth/account.html", **context), status
+
+
 @bp.route("/account", methods=["GET"])
 @login_required
 def account() -> ResponseReturnValue:
-    return render_template(
-        "auth/account.html",
-        password_form=PasswordForm(),
-        token_form=TokenForm(),
-        confirm=ConfirmForm(),
-        new_token=None,
-    )
+    return _account_page()
 
 
 @bp.route("/account/password", methods=["POST"])
@@ -115,13 +125,7 @@ def change_password() -> ResponseReturnValue:
             except CloudSimError as exc:
                 form.new.errors = [str(exc)]
                 status = exc.status
-    return render_template(
-        "auth/account.html",
-        password_form=form,
-        token_form=TokenForm(),
-        confirm=ConfirmForm(),
-        new_token=None,
-    ), status
+    return _account_page(status, password_form=form)
 
 
 @bp.route("/account/tokens", methods=["POST"])
@@ -134,20 +138,8 @@ def create_token() -> ResponseReturnValue:
         except CloudSimError as exc:
             form.name.errors = [str(exc)]
         else:
-            return render_template(
-                "auth/account.html",
-                password_form=PasswordForm(),
-                token_form=TokenForm(),
-                confirm=ConfirmForm(),
-                new_token=issued.plaintext,
-            )
-    return render_template(
-        "auth/account.html",
-        password_form=PasswordForm(),
-        token_form=form,
-        confirm=ConfirmForm(),
-        new_token=None,
-    ), 400
+            return _account_page(new_token=issued.plaintext)
+    return _account_page(400, token_form=form)
 
 
 @bp.route("/account/tokens/<int:token_id>/revoke", methods=["POST"])
@@ -157,4 +149,33 @@ def revoke(token_id: int) -> ResponseReturnValue:
         return redirect(url_for("auth.account")), 400
     revoke_token(current_user, token_id)
     flash("Token revoked.", "info")
+    return redirect(url_for("auth.account"))
+
+
+@bp.route("/account/ssh-keys", methods=["POST"])
+@login_required
+def add_ssh_key() -> ResponseReturnValue:
+    form = SshKeyForm()
+    if form.validate_on_submit():
+        try:
+            if request.form.get("generate"):
+                made = ssh_keys.generate_key(current_user, form.name.data or "")
+                # the private key is in this page only: CloudSim keeps the public half
+                return _account_page(new_private_key=made.private_key)
+            key = ssh_keys.add_key(current_user, form.public_key.data or "", form.name.data or "")
+        except CloudSimError as exc:
+            form.public_key.errors = [str(exc)]
+            return _account_page(exc.status, ssh_form=form)
+        flash(f"SSH key {key.fingerprint} added.", "info")
+        return redirect(url_for("auth.account"))
+    return _account_page(400, ssh_form=form)
+
+
+@bp.route("/account/ssh-keys/<int:key_id>/delete", methods=["POST"])
+@login_required
+def delete_ssh_key(key_id: int) -> ResponseReturnValue:
+    if not ConfirmForm().validate_on_submit():
+        return redirect(url_for("auth.account")), 400
+    ssh_keys.delete_key(current_user, key_id)
+    flash("SSH key removed.", "info")
     return redirect(url_for("auth.account"))

@@ -96,6 +96,14 @@ class RunSchema(Schema):
     sim_seconds = fields.Float()
     uplink_bits_used = fields.Int()
     downlink_bits_used = fields.Int()
+    uplink_spent_at = fields.DateTime(
+        allow_none=True,
+        metadata={"description": "When the uplink cap was spent (dropped since); null if not"},
+    )
+    downlink_spent_at = fields.DateTime(
+        allow_none=True,
+        metadata={"description": "When the downlink cap was spent; null if not"},
+    )
     started_at = fields.DateTime()
     running_at = fields.DateTime(allow_none=True)
     finished_at = fields.DateTime(allow_none=True)

@@ -12,16 +12,16 @@ import shlex
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from datetime import timedelta
+from datetime import datetime, timedelta
 
 from celery import shared_task
 from csrouter.bandwidth_log import read_bandwidth_log
-from csrouter.protocol import payload_bits_used
+from csrouter.protocol import payload_bits_used, spent_at
 from drcsim.rundir import FINAL, SCORE, read_score_log, serve_argv
 from flask import current_app
 from sqlalchemy import select
 
-from cloudsim.competition import lifecycle
+from cloudsim.competition import current_run, lifecycle
 from cloudsim.competition.artifacts import (
     LogStore,
     artifact_for,
@@ -65,6 +65,12 @@ class Machines:
     router: Target | None
     sim_ip: str
     by_name: dict[str, Target]
+    fc_names: tuple[str, ...] = ()
+
+    @property
+    def field_computers(self) -> list[Target]:
+        """Return the field computers (team code runs there)."""
+        return [self.by_name[name] for name in self.fc_names if name in self.by_name]
 
     def by_role(self) -> dict[str, Target]:
         found = {"sim": self.sim}
@@ -104,6 +110,7 @@ def machines(
             router=reach[router.name] if router is not None else None,
             sim_ip=sim.private_ip,
             by_name=reach,
+            fc_names=tuple(m.name for m in constellation.machines if m.role == "fc"),
         )
 
 
@@ -162,6 +169,8 @@ def start_run_job(ctx: JobContext) -> None:
                 router_control.arm(reach.executor, reach.router, limits, f"run-{run.id}")
             ctx.stage("simulator", 60)
             _start_simulator(reach, run)
+            run.running_at = utcnow()
+            current_run.announce(reach.executor, reach.field_computers, run, reach.sim_ip)
     except (CloudSimError, SSHError, ValueError) as exc:
         db.session.rollback()
         run = _run(ctx)
@@ -229,6 +238,10 @@ def _stop_on_machines(
         reach.executor.run(reach.sim, f"systemctl stop {unit} || true", timeout=STOP_TIMEOUT_S + 30)
     except SSHError as exc:
         problems.append(f"simulator: {exc}")
+    try:
+        current_run.withdraw(reach.executor, reach.field_computers)
+    except SSHError as exc:
+        problems.append(f"current-run.json: {exc}")
     if reach.router is not None:
         ctx.stage("router", 30)
         try:
@@ -272,6 +285,8 @@ def score_run(run: Run, store: LogStore) -> None:
         usage = read_bandwidth_log(store.lines(bandwidth.location))
         run.uplink_bits_used = usage["uplink"].used_bits
         run.downlink_bits_used = usage["downlink"].used_bits
+        run.uplink_spent_at = run.uplink_spent_at or usage["uplink"].spent_at
+        run.downlink_spent_at = run.downlink_spent_at or usage["downlink"].spent_at
     db.session.flush()
 
 
@@ -349,14 +364,23 @@ def _count_bits(run: Run, reach: Machines) -> None:
     """Show the bits used so far (the bandwidth log gives the final figures at the end)."""
     assert reach.router is not None
     try:
-        used = payload_bits_used(router_control.counters(reach.executor, reach.router))
+        counts = router_control.counters(reach.executor, reach.router)
+        used = payload_bits_used(counts)
+        spent = {d: _moment(when) for d, when in spent_at(counts).items()}
     except (CloudSimError, KeyError, TypeError, ValueError) as exc:
         # the run's end is still detected; only the live figure waits for the next beat
         log.warning("run %s: cannot read the router's counters: %s", run.id, exc)
         _router_fault(run, reach)
         return
     run.uplink_bits_used, run.downlink_bits_used = used["uplink"], used["downlink"]
+    run.uplink_spent_at = run.uplink_spent_at or spent["uplink"]
+    run.downlink_spent_at = run.downlink_spent_at or spent["downlink"]
     _router_fault(run, reach)
+
+
+def _moment(text: str | None) -> datetime | None:
+    """Return csrouter's ISO 8601 time as a datetime (None stays None)."""
+    return datetime.fromisoformat(text) if text else None
 
 
 def _router_fault(run: Run, reach: Machines) -> None:

@@ -183,6 +183,11 @@ def run_status(run_id: int) -> ResponseReturnValue:
         end_reason=shown.end_reason,
         error=shown.error,
         bits_left=_bits_left(shown),
+        # a spent direction is dropped from then on: say so, not only "bits left"
+        spent_since={
+            "uplink": shown.uplink_spent_at.isoformat() if shown.uplink_spent_at else None,
+            "downlink": shown.downlink_spent_at.isoformat() if shown.downlink_spent_at else None,
+        },
     )
 
 

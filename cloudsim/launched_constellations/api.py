@@ -11,6 +11,7 @@ from cloudsim.jobs.schemas import JobSchema
 from cloudsim.launched_constellations import service, vpn
 from cloudsim.launched_constellations.schemas import (
     ConstellationSchema,
+    ConstellationUpdateSchema,
     LaunchedSchema,
     LaunchSchema,
     VpnBundleQuerySchema,
@@ -42,6 +43,12 @@ class ConstellationById(MethodView):
     def get(self, ref: int) -> Any:
         """Return a constellation with its machines and their verification."""
         return service.get_constellation(caller(), ref)
+
+    @blp.arguments(ConstellationUpdateSchema)
+    @blp.response(200, ConstellationSchema)
+    def patch(self, data: dict[str, Any], ref: int) -> Any:
+        """Let the team account on the field computers use sudo, or not (officers)."""
+        return service.set_team_sudo(caller(), ref, data["team_sudo"])
 
     @blp.response(202, JobSchema)
     def delete(self, ref: int) -> Any:

@@ -20,6 +20,7 @@ from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.launched_constellations import lifecycle
+from cloudsim.launched_constellations.access import team_keys
 from cloudsim.launched_constellations.connect import (
     machine_host_keys,
     record_routes,
@@ -36,6 +37,7 @@ from cloudsim.models import Constellation, ConstellationState, Secret
 from cloudsim.providers.service import Provider, open_provider
 from constellations.definition import ConstellationKind
 from constellations.plans import PLANS, Action, Need, PlanContext, PlanItem, firewall, needs_of
+from constellations.plans.roles import team_account
 from provisioners.providers.base import CloudSimNodeDriver
 from provisioners.remote.operations import apply
 from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor
@@ -113,24 +115,32 @@ def _launch(
         _deploy(ctx, executor, reach, plans)
         ctx.stage("verify", 80)
         verify_constellation(
-            ctx, executor, constellation, kind, reach, driver.ex_public_proxy_command
+            ctx,
+            executor,
+            constellation,
+            kind,
+            reach,
+            driver.ex_public_proxy_command,
+            driver.ex_public_command,
         )
 
 
-@job_kind("constellation.refresh_vpn")
-def refresh_vpn(ctx: JobContext) -> None:
-    """Push the VPN's current keys and revocation list to the router (after a revocation)."""
+@job_kind("constellation.refresh_access")
+def refresh_access(ctx: JobContext) -> None:
+    """Push who may come in: the VPN's revocations to the router (ending the revoked sessions
+    only) and the team members' SSH keys to the field computers' team account."""
     constellation = _constellation(ctx)
     if constellation.state != ConstellationState.READY:
         ctx.log(
             f"{constellation.name} is {constellation.state.value}: its next launch "
-            "applies the current revocation list"
+            "applies the current keys and revocation list"
         )
         return
     config: Config = current_app.config["CLOUDSIM"]
     kind = launched_kind(constellation)
-    # the machines whose plans deploy the VPN, and just those plans
+    # the machines whose plans deploy the VPN (just those plans), and the field computers
     routers = [m for m in kind.machines if Need.VPN in needs_of(m.plan)]
+    field_computers = [m for m in kind.machines if "field_computer" in m.plan]
     keys = constellation_keypair(constellation)
     subnet = constellation.resources["subnet"]
     with SSHExecutor(
@@ -140,13 +150,18 @@ def refresh_vpn(ctx: JobContext) -> None:
         contexts = {
             m.name: _plan_context(constellation, kind, m.name, subnet, config) for m in routers
         }
-        ctx.stage("vpn", 30)
+        ctx.stage("access", 30)
         contexts = supply_needs(Supply(ctx, executor, constellation, config), contexts)
         plans = {
             n: [item for p in c.machine.plan if Need.VPN in needs_of([p]) for item in PLANS[p](c)]
             for n, c in contexts.items()
         }
+        for machine in field_computers:
+            plans[machine.name] = team_account(
+                _plan_context(constellation, kind, machine.name, subnet, config)
+            )
         _deploy(ctx, executor, {n: reach[n] for n in plans}, plans)
+        ctx.log(f"team account: {len(team_keys(constellation.team_id))} key(s) installed")
 
 
 def ensure_network(
@@ -261,6 +276,7 @@ def _in_parallel(
 def _plan_context(
     constellation: Constellation, kind: ConstellationKind, name: str, subnet: str, config: Config
 ) -> PlanContext:
+    field_computer = "field_computer" in kind.machine(name).plan
     return PlanContext(
         constellation=constellation.name,
         team=constellation.team.name if constellation.team else "",
@@ -268,6 +284,8 @@ def _plan_context(
         machine=kind.machine(name),
         subnet=subnet,
         addresses={m.name: m.private_ip or "" for m in constellation.machines},
+        team_keys=team_keys(constellation.team_id) if field_computer else (),
+        team_sudo=constellation.team_sudo,
     )
 
 

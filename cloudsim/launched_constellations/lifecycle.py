@@ -41,9 +41,10 @@ def start_terminate(actor: Actor, constellation: Constellation) -> Job:
     return _start_job(actor, constellation, "constellation.terminate")
 
 
-def start_refresh_vpn(actor: Actor, constellation: Constellation) -> Job:
-    """Start the job that pushes the VPN's current keys to the constellation's router."""
-    return _start_job(actor, constellation, "constellation.refresh_vpn")
+def start_refresh_access(actor: Actor, constellation: Constellation) -> Job:
+    """Start the job that pushes who may come in: the VPN's revocations to the router, the
+    team members' SSH keys to the field computers."""
+    return _start_job(actor, constellation, "constellation.refresh_access")
 
 
 def launching(constellation: Constellation) -> None:

@@ -27,7 +27,14 @@ class ConstellationSchema(Schema):
     state = fields.Str()
     error = fields.Str(allow_none=True)
     created_at = fields.DateTime()
+    team_sudo = fields.Bool(
+        metadata={"description": "May the team account on the field computers use sudo"}
+    )
     machines = fields.List(fields.Nested(MachineSchema))
+
+
+class ConstellationUpdateSchema(Schema):
+    team_sudo = fields.Bool(required=True)
 
 
 class LaunchSchema(Schema):

@@ -14,6 +14,7 @@ from cloudsim.auth.policy import Actor, require_role, require_team_access
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import lifecycle
+from cloudsim.launched_constellations.access import TEAM_KINDS, refresh_team_access
 from cloudsim.launched_constellations.keys import constellation_keypair, instance_admin_password
 from cloudsim.models import Constellation, ConstellationState, Job, Machine, Role, Team
 from cloudsim.providers.service import PROVIDERS
@@ -161,6 +162,31 @@ def _audit(action: str, actor: Actor, constellation: Constellation) -> None:
         target_id=constellation.id,
         team_id=constellation.team_id,
     )
+
+
+def set_team_sudo(actor: Actor, ref: int | str, allowed: bool) -> Constellation:
+    """Let the team account on the field computers use sudo, or not (officers); pushed at once."""
+    require_role(actor, Role.OFFICER, "change what a team may do on its field computers")
+    constellation = get_constellation(actor, ref)
+    if constellation.kind not in TEAM_KINDS:
+        raise InvalidInput(
+            f"{constellation.name} is a {constellation.kind} constellation: "
+            "it has no field computers with a team account"
+        )
+    if constellation.team_sudo != allowed:
+        constellation.team_sudo = allowed
+        record(
+            "constellation.team_sudo",
+            actor,
+            target_type="constellation",
+            target_id=constellation.id,
+            team_id=constellation.team_id,
+            allowed=allowed,
+        )
+        db.session.flush()
+        if constellation.state == ConstellationState.READY:
+            refresh_team_access([], also=[constellation])
+    return constellation
 
 
 def ssh_bundle(actor: Actor, ref: int | str) -> tuple[str, bytes]:

@@ -18,12 +18,13 @@ from cloudsim.auth.policy import role_required
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.views import job_summary
-from cloudsim.launched_constellations import service, vpn
+from cloudsim.launched_constellations import access, service, vpn
 from cloudsim.launched_constellations.forms import LaunchForm
 from cloudsim.models import Role
 from cloudsim.people.service import visible_teams
 from cloudsim.web.downloads import attachment
-from cloudsim.web.inputs import query_id
+from cloudsim.web.inputs import query_id, query_int
+from constellations.plans.roles import TEAM_USER
 
 bp = Blueprint("constellations", __name__)
 
@@ -72,6 +73,9 @@ def show(ref: int) -> ResponseReturnValue:
         constellation=constellation,
         job=service.latest_job(constellation),
         confirm=ConfirmForm(),
+        team_user=TEAM_USER,
+        field_computers=access.field_computers(constellation),
+        ssh_config=access.ssh_config(constellation),
     )
 
 
@@ -115,6 +119,18 @@ def retry(ref: int) -> ResponseReturnValue:
         return redirect(url_for("constellations.show", ref=ref)), 400
     service.retry(current_user, ref)
     flash("Launching again.", "info")
+    return redirect(url_for("constellations.show", ref=ref))
+
+
+@bp.route("/constellations/<int:ref>/team-sudo", methods=["POST"])
+@role_required(Role.OFFICER)
+def team_sudo(ref: int) -> ResponseReturnValue:
+    """Let the team account on the field computers use sudo (?allowed=1), or not (0)."""
+    if not ConfirmForm().validate_on_submit():
+        return redirect(url_for("constellations.show", ref=ref)), 400
+    allowed = query_int("allowed", 0, maximum=1) == 1
+    service.set_team_sudo(current_user, ref, allowed)
+    flash("The team may now use sudo." if allowed else "The team may no longer use sudo.", "info")
     return redirect(url_for("constellations.show", ref=ref))
 
 

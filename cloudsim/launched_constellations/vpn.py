@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+from collections.abc import Iterable
 from typing import Any
 
 from sqlalchemy import select
@@ -13,9 +14,11 @@ from cloudsim.audit.service import record
 from cloudsim.auth.policy import SYSTEM, require_team_access
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
+from cloudsim.launched_constellations.access import field_computers, ssh_config
 from cloudsim.launched_constellations.keys import constellation_secret
 from cloudsim.models import Constellation, ConstellationState, Role, Secret, SecretKind, User
 from constellations.plans.base import VpnMaterial
+from constellations.plans.roles import TEAM_USER
 from constellations.plans.router import VPN_SERVER_NAME
 from provisioners.remote import pki
 from provisioners.remote.operations import MachineTemplates
@@ -69,26 +72,51 @@ def server_material(constellation: Constellation) -> VpnMaterial:
     server = _pem_pair(
         constellation, SERVER, lambda: _issued_json(pki.issue_server(ca, VPN_SERVER_NAME))
     )
+    revocations = _revocations(constellation, ca)
     return VpnMaterial(
         ca_cert=ca.cert_pem,
         server_cert=server["cert"],
         server_key=server["key"],
-        crl=_revocations(constellation, ca)["crl"],
+        crl=revocations["crl"],
+        revoked=tuple(revocations.get("names", [])),
     )
 
 
 def client_certificate(constellation: Constellation, user: User) -> dict[str, Any]:
     """Return the user's certificate for this constellation's VPN, issuing it the first time."""
     ca = _ca(constellation)
-    return _pem_pair(
-        constellation,
-        f"{CLIENT_PREFIX}{user.id}",
-        lambda: _issued_json(pki.issue_client(ca, user.email)),
+
+    def issue() -> dict[str, Any]:
+        _forgive(constellation, ca, user.email)
+        return _issued_json(pki.issue_client(ca, user.email))
+
+    return _pem_pair(constellation, f"{CLIENT_PREFIX}{user.id}", issue)
+
+
+def _forgive(constellation: Constellation, ca: pki.CertificateAuthority, name: str) -> None:
+    """Stop disconnecting a name that gets a new certificate (a user back on the team)."""
+    before = _revocations(constellation, ca)
+    if name in before.get("names", []):
+        revoked = _revoked_row(constellation)
+        revoked.value = json.dumps({**before, "names": sorted(set(before["names"]) - {name})})
+
+
+def _revoked_row(constellation: Constellation) -> Secret:
+    row = db.session.scalar(
+        select(Secret).where(
+            Secret.owner_type == "constellation",
+            Secret.owner_id == constellation.id,
+            Secret.name == REVOKED,
+        )
     )
+    assert row is not None  # _revocations made it
+    return row
 
 
-def revoke_user(user: User) -> list[Constellation]:
-    """Revoke the user's VPN certificates everywhere; return the constellations to update."""
+def revoke_user(user: User, *, everywhere: bool = True) -> list[Constellation]:
+    """Revoke the user's VPN certificates (everywhere, or where they are no longer an active
+    member of the constellation's team); return the constellations to update."""
+    member = user.active and user.role == Role.USER
     secrets = db.session.scalars(
         select(Secret).where(
             Secret.owner_type == "constellation", Secret.name == f"{CLIENT_PREFIX}{user.id}"
@@ -97,20 +125,12 @@ def revoke_user(user: User) -> list[Constellation]:
     changed = []
     for secret in secrets:
         constellation = db.session.get(Constellation, secret.owner_id)
-        if constellation is None:
+        if constellation is None or (
+            not everywhere and member and constellation.team_id == user.team_id
+        ):
             continue
-        serial = int(json.loads(secret.value)["serial"])
-        ca = _ca(constellation)
-        serials = sorted({*_revocations(constellation, ca)["serials"], serial})
-        revoked = db.session.scalar(
-            select(Secret).where(
-                Secret.owner_type == "constellation",
-                Secret.owner_id == constellation.id,
-                Secret.name == REVOKED,
-            )
-        )
-        assert revoked is not None  # _revocations made it
-        revoked.value = json.dumps({"serials": serials, "crl": pki.issue_crl(ca, serials)})
+        issued = json.loads(secret.value)
+        revoke_certificate(constellation, int(issued["serial"]), issued["cn"])
         db.session.delete(secret)
         record(
             "vpn.revoke",
@@ -119,10 +139,56 @@ def revoke_user(user: User) -> list[Constellation]:
             target_id=user.id,
             team_id=constellation.team_id,
             constellation=constellation.name,
-            serial=serial,
+            serial=int(issued["serial"]),
         )
         changed.append(constellation)
     return changed
+
+
+def revoke_certificate(constellation: Constellation, serial: int, name: str) -> None:
+    """Add a certificate to the constellation's revocation list (and its name to those the
+    router disconnects)."""
+    ca = _ca(constellation)
+    before = _revocations(constellation, ca)
+    serials = sorted({*before["serials"], serial})
+    names = sorted({*before.get("names", []), name})
+    _revoked_row(constellation).value = json.dumps(
+        {"serials": serials, "crl": pki.issue_crl(ca, serials), "names": names}
+    )
+
+
+def issue_check_certificate(constellation: Constellation, name: str) -> pki.IssuedCertificate:
+    """Issue a client certificate that is stored nowhere (verification's own VPN client)."""
+    return pki.issue_client(_ca(constellation), name)
+
+
+def client_config(constellation: Constellation, who: str, cert: str, key: str) -> str:
+    """Return the .ovpn configuration of a client with this certificate and key."""
+    return MachineTemplates().render(
+        "router/client.ovpn.j2",
+        {
+            "user": who,
+            "constellation": constellation.name,
+            "file_name": _file_name(constellation, who),
+            "remote_host": _router_address(constellation),
+            "remote_port": VpnMaterial.port,
+            "server_name": VPN_SERVER_NAME,
+            "ca_cert": _ca(constellation).cert_pem,
+            "client_cert": cert,
+            "client_key": key,
+        },
+    )
+
+
+def _router_address(constellation: Constellation) -> str:
+    router = next((m for m in constellation.machines if m.role == "router"), None)
+    if router is None or not router.public_ip:
+        raise Conflict(f"{constellation.name} has no router address yet; wait until it is ready")
+    return router.public_ip
+
+
+def _file_name(constellation: Constellation, who: str) -> str:
+    return f"{constellation.name}-{who.split('@')[0]}.ovpn"
 
 
 def vpn_bundle(
@@ -149,37 +215,24 @@ def vpn_bundle(
         )
     if constellation.state in (ConstellationState.TERMINATING, ConstellationState.TERMINATED):
         raise Conflict(f"{constellation.name} is {constellation.state.value}")
-    router = next((m for m in constellation.machines if m.role == "router"), None)
-    if router is None or not router.public_ip:
-        raise Conflict(f"{constellation.name} has no router address yet; wait until it is ready")
-    ca_cert = _ca(constellation).cert_pem
+    remote_host = _router_address(constellation)  # before a certificate is issued
     client = client_certificate(constellation, user)
-    file_name = f"{constellation.name}-{user.email.split('@')[0]}.ovpn"
-    templates = MachineTemplates()
-    common = {
-        "user": user.email,
-        "constellation": constellation.name,
-        "file_name": file_name,
-        "remote_host": router.public_ip,
-        "remote_port": VpnMaterial.port,
-    }
-    config = templates.render(
-        "router/client.ovpn.j2",
-        {
-            **common,
-            "server_name": VPN_SERVER_NAME,
-            "ca_cert": ca_cert,
-            "client_cert": client["cert"],
-            "client_key": client["key"],
-        },
-    )
-    readme = templates.render(
+    config = client_config(constellation, user.email, client["cert"], client["key"])
+    file_name = _file_name(constellation, user.email)
+    readme = MachineTemplates().render(
         "router/vpn-bundle-README.txt.j2",
         {
-            **common,
+            "user": user.email,
+            "constellation": constellation.name,
+            "file_name": file_name,
+            "remote_host": remote_host,
+            "remote_port": VpnMaterial.port,
             "lan_addresses": {
                 m.name: m.private_ip or "?" for m in constellation.machines if m.role != "router"
             },
+            "field_computers": field_computers(constellation),
+            "team_user": TEAM_USER,
+            "ssh_config": ssh_config(constellation),
         },
     )
     buffer = io.BytesIO()
@@ -199,9 +252,13 @@ def vpn_bundle(
     return f"{constellation.name}-vpn-{user.email.split('@')[0]}.zip", buffer.getvalue()
 
 
-def revoke_and_push(user: User) -> None:
-    """Revoke the user's VPN certificates and push the new revocation lists to the routers."""
-    from cloudsim.launched_constellations import lifecycle
+def revoke_and_push(user: User, team_ids: Iterable[int | None] = ()) -> None:
+    """Revoke the user's VPN certificates and push access to the routers and field computers.
 
-    for constellation in revoke_user(user):
-        lifecycle.start_refresh_vpn(SYSTEM, constellation)
+    The one hook for a user leaving (disabled, moved, deleted) or coming back: `team_ids` are
+    the teams whose field computers' keys change (the old team and the new one).
+    """
+    from cloudsim.launched_constellations.access import refresh_team_access
+
+    revoked = revoke_user(user, everywhere=False)
+    refresh_team_access([*team_ids, user.team_id], also=revoked)

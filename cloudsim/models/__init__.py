@@ -5,7 +5,7 @@ from cloudsim.models.base import Base, utcnow
 from cloudsim.models.competition import Artifact, Run, RunState, ScoreEvent, Task
 from cloudsim.models.jobs import Job, JobState
 from cloudsim.models.machines import Constellation, ConstellationState, Machine, MachineState
-from cloudsim.models.people import ApiToken, LoginSession, Role, Team, User
+from cloudsim.models.people import ApiToken, LoginSession, Role, SshKey, Team, User
 from cloudsim.models.secrets import Secret, SecretKind
 
 __all__ = [
@@ -26,6 +26,7 @@ __all__ = [
     "ScoreEvent",
     "Secret",
     "SecretKind",
+    "SshKey",
     "Task",
     "Team",
     "User",

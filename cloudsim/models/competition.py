@@ -83,6 +83,9 @@ class Run(Base):
     sim_seconds: Mapped[float] = mapped_column(default=0.0)
     uplink_bits_used: Mapped[int] = mapped_column(BigInteger, default=0)
     downlink_bits_used: Mapped[int] = mapped_column(BigInteger, default=0)
+    # when a direction's cap was spent (its traffic dropped from then on), None while it lasts
+    uplink_spent_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    downlink_spent_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     started_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     running_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime)

@@ -73,6 +73,8 @@ class Constellation(Base):
     error: Mapped[str | None] = mapped_column(Text)
     # Provider-side identifiers (network id, security groups, ...) needed to clean up.
     resources: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    # May the team's account on the field computers use sudo? Officers decide; off by default.
+    team_sudo: Mapped[bool] = mapped_column(default=False, server_default="0")
     created_by_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow, onupdate=utcnow)

@@ -7,7 +7,7 @@ from datetime import datetime
 from typing import TYPE_CHECKING
 
 from flask_login import UserMixin
-from sqlalchemy import ForeignKey, String
+from sqlalchemy import ForeignKey, String, Text, UniqueConstraint
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from cloudsim.models.base import Base, UTCDateTime, str_enum, utcnow
@@ -70,6 +70,9 @@ class User(UserMixin, Base):
     sessions: Mapped[list[LoginSession]] = relationship(
         back_populates="user", cascade="all, delete-orphan", passive_deletes=True
     )
+    ssh_keys: Mapped[list[SshKey]] = relationship(
+        back_populates="user", cascade="all, delete-orphan", order_by="SshKey.id"
+    )
 
     def __repr__(self) -> str:
         return f"<User {self.id} {self.email!r} {self.role.value}>"
@@ -119,3 +122,24 @@ class LoginSession(Base):
 
     def __repr__(self) -> str:
         return f"<LoginSession {self.id} user={self.user_id}>"
+
+
+class SshKey(Base):
+    """A user's SSH public key: installed for the team account on their team's field computers."""
+
+    __tablename__ = "ssh_keys"
+    __table_args__ = (UniqueConstraint("user_id", "fingerprint"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("users.id", ondelete="CASCADE"), index=True)
+    name: Mapped[str] = mapped_column(String(80))
+    key_type: Mapped[str] = mapped_column(String(40))
+    bits: Mapped[int] = mapped_column()
+    public_key: Mapped[str] = mapped_column(Text)  # "TYPE BASE64", without the comment
+    fingerprint: Mapped[str] = mapped_column(String(60))  # SHA256:..., as ssh-keygen -l
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+
+    user: Mapped[User] = relationship(back_populates="ssh_keys")
+
+    def __repr__(self) -> str:
+        return f"<SshKey {self.id} {self.fingerprint} user={self.user_id}>"

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import sys
+from typing import TextIO
 
 import click
 
+from cloudsim.auth import ssh_keys
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, emit, reports_errors
-from cloudsim.models import Role, Team, User
+from cloudsim.errors import InvalidInput
+from cloudsim.models import Role, SshKey, Team, User
 from cloudsim.people import service
 
 
@@ -154,3 +157,65 @@ def update_user(
             as_json,
             f"updated {updated.email}: {updated.role.value}, {team}, {state}",
         )
+
+
+@user.group("ssh-key")
+def ssh_key() -> None:
+    """A user's SSH public keys (they log into `team` on the team's field computers)."""
+
+
+def _key_data(key: SshKey) -> dict[str, object]:
+    return {
+        "id": key.id,
+        "name": key.name,
+        "key_type": key.key_type,
+        "bits": key.bits,
+        "fingerprint": key.fingerprint,
+    }
+
+
+@ssh_key.command("add")
+@click.argument("email")
+@click.argument("key_file", type=click.File("r"), required=False)
+@click.option("--generate", is_flag=True, help="Make an ed25519 key; print its private key once.")
+@click.option("--name", default="", help="A name for the key.")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def add_ssh_key(
+    email: str, key_file: TextIO | None, generate: bool, name: str, as_json: bool
+) -> None:
+    """Add a public key (KEY_FILE, '-' for standard input) for EMAIL, or --generate one."""
+    with app_context():
+        owner = service.find_user(email)
+        if generate == (key_file is not None):
+            raise InvalidInput("give a KEY_FILE or --generate (one of them)")
+        if key_file is None:
+            made = ssh_keys.generate_key(owner, name)
+            data = {**_key_data(made.key), "private_key": made.private_key}
+            emit(data, as_json, f"{made.key.fingerprint}\n{made.private_key}".rstrip())
+            return
+        key = ssh_keys.add_key(owner, key_file.read(), name)
+        emit(_key_data(key), as_json, f"added {key.key_type} key {key.fingerprint} (id {key.id})")
+
+
+@ssh_key.command("list")
+@click.argument("email")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def list_ssh_keys(email: str, as_json: bool) -> None:
+    """List EMAIL's SSH keys with their fingerprints."""
+    with app_context():
+        keys = ssh_keys.list_keys(service.find_user(email))
+        lines = "\n".join(f"{k.id}\t{k.key_type}\t{k.fingerprint}\t{k.name}" for k in keys)
+        emit([_key_data(k) for k in keys], as_json, lines or "no SSH keys")
+
+
+@ssh_key.command("remove")
+@click.argument("email")
+@click.argument("key_id", type=int)
+@reports_errors
+def remove_ssh_key(email: str, key_id: int) -> None:
+    """Remove EMAIL's key KEY_ID; it stops working on the field computers at once."""
+    with app_context():
+        ssh_keys.delete_key(service.find_user(email), key_id)
+        click.echo(f"removed SSH key {key_id}")

@@ -18,7 +18,7 @@ from cloudsim.auth.tokens import revoke_all_tokens
 from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import ConstellationState, Role, Team, User
-from cloudsim.people.access import revoke_team_access
+from cloudsim.people.access import revoke_before_delete, revoke_team_access
 
 TEAM_NAME_MAX = 80
 
@@ -279,7 +279,7 @@ def update_user(
         user.role = new_role
         # Not team_id=: that is record()'s own argument (the team the event belongs to).
         changes.update(role=new_role.value, team=user.team_id, old_team=old_team)
-    leaving_team = user.team_id != old_team or (active is False and user.active)
+    access_changes = user.team_id != old_team or (active is not None and active != user.active)
     if name is not None:
         user.name = name.strip()[:120]
         changes["name"] = user.name
@@ -299,8 +299,9 @@ def update_user(
         "user.update", actor, target_type="user", target_id=user.id, team_id=user.team_id, **changes
     )
     db.session.flush()
-    if leaving_team:
-        revoke_team_access(user)
+    if access_changes:
+        # VPN certificates and SSH keys follow at once: off the old team, onto the new one
+        revoke_team_access(user, old_team)
     return user
 
 
@@ -312,7 +313,7 @@ def delete_user(actor: Actor, user_id: int) -> None:
         raise Forbidden("you cannot delete your own account")
     if user.role == Role.ADMIN:
         _ensure_another_admin(user)
-    revoke_team_access(user)
+    after_delete = revoke_before_delete(user)
     record(
         "user.delete",
         actor,
@@ -323,6 +324,7 @@ def delete_user(actor: Actor, user_id: int) -> None:
     )
     db.session.delete(user)
     db.session.flush()
+    after_delete()  # jobs are sent once the caller commits: they see the user gone
 
 
 def _ensure_another_admin(user: User) -> None:

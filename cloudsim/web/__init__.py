@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 from datetime import datetime
 
 from flask import Flask, Response, current_app, render_template, request
@@ -30,6 +31,7 @@ def register_web(app: Flask) -> None:
     """Register the error pages and the template globals every page uses."""
     app.jinja_env.globals.update(Role=Role)
     app.jinja_env.filters["datetime"] = format_datetime
+    app.jinja_env.filters["b64encode"] = _b64encode
 
     @app.after_request
     def commit(response: Response) -> Response:
@@ -80,6 +82,11 @@ def _rollback() -> None:
         db.session.rollback()
     except Exception:  # the original error is what gets reported
         current_app.logger.warning("rollback failed while answering an error", exc_info=True)
+
+
+def _b64encode(text: str) -> str:
+    """Return text as base64 (for data: links, e.g. a key shown once)."""
+    return base64.b64encode(text.encode()).decode()
 
 
 def _error_page(status: int, message: str, fields: object = None) -> ResponseReturnValue:

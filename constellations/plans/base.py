@@ -45,6 +45,7 @@ class VpnMaterial:
     server_cert: str
     server_key: str = field(repr=False)
     crl: str = ""
+    revoked: tuple[str, ...] = ()  # certificate names whose sessions the router must end
     network: str = "10.8.0.0/24"  # addresses handed to VPN clients
     port: int = 1194
 
@@ -64,6 +65,8 @@ class PlanContext:
     router_wheelhouse: Path | None = None  # routers with a VPN: csrouter and its wheels
     app_bundle: Path | None = None  # CloudSim servers only: source + wheels
     secrets: Mapping[str, str] = field(default_factory=dict, repr=False)
+    team_keys: tuple[str, ...] = ()  # field computers: the team members' SSH public keys
+    team_sudo: bool = False  # field computers: may the team account use sudo
     templates: MachineTemplates = field(default_factory=MachineTemplates)
 
     @property

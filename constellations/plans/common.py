@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 from constellations.plans.base import PlanContext, PlanItem
-from provisioners.remote.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule
+from provisioners.remote.firewall import SOURCE_ANY, SOURCE_LAN, SOURCE_PUBLIC, FirewallRule
 from provisioners.remote.operations import (
     deb_packages,
     default_route,
     file,
-    iptables_chain,
+    iptables_chain_exact,
     iptables_rule,
 )
 
@@ -44,23 +44,29 @@ def common(ctx: PlanContext) -> list[PlanItem]:
 
 
 def firewall(ctx: PlanContext) -> list[PlanItem]:
-    """Plan the host firewall: the kind's rules for this role, then drop everything else."""
-    rules = [rule for rule in ctx.kind.firewall if rule.to_role == ctx.machine.role]
-    operations: list[PlanItem] = [
-        iptables_chain(FIREWALL_CHAIN),
-        iptables_rule(FIREWALL_CHAIN, ["-i", "lo", "-j", "ACCEPT"]),
-        iptables_rule(
-            FIREWALL_CHAIN, ["-m", "conntrack", "--ctstate", "ESTABLISHED,RELATED", "-j", "ACCEPT"]
-        ),
+    """Plan the host firewall: the kind's rules for this role, then drop everything else.
+
+    The chain holds exactly these rules: a rule an older plan allowed is taken out.
+    """
+    return [
+        iptables_chain_exact(FIREWALL_CHAIN, host_firewall_rules(ctx)),
+        iptables_rule("INPUT", ["-j", FIREWALL_CHAIN], insert=True),
     ]
-    for rule in rules:
-        for source in _sources(rule, ctx):
-            operations.append(
-                iptables_rule(FIREWALL_CHAIN, [*source, *_match(rule), "-j", "ACCEPT"])
-            )
-    operations.append(iptables_rule(FIREWALL_CHAIN, ["-j", "DROP"]))
-    operations.append(iptables_rule("INPUT", ["-j", FIREWALL_CHAIN], insert=True))
-    return operations
+
+
+def host_firewall_rules(ctx: PlanContext) -> list[list[str]]:
+    """Return the rules of this machine's firewall chain, in order (the last drops)."""
+    return [
+        ["-i", "lo", "-j", "ACCEPT"],
+        ["-m", "conntrack", "--ctstate", "ESTABLISHED,RELATED", "-j", "ACCEPT"],
+        *(
+            [*source, *match(rule), "-j", "ACCEPT"]
+            for rule in ctx.kind.firewall
+            if rule.to_role == ctx.machine.role
+            for source in _sources(rule, ctx)
+        ),
+        ["-j", "DROP"],
+    ]
 
 
 def _sources(rule: FirewallRule, ctx: PlanContext) -> list[list[str]]:
@@ -68,10 +74,13 @@ def _sources(rule: FirewallRule, ctx: PlanContext) -> list[list[str]]:
         return [[]]
     if rule.source == SOURCE_LAN:
         return [["-s", ctx.subnet]]
+    if rule.source == SOURCE_PUBLIC:
+        return [["!", "-s", ctx.subnet]]
     return [["-s", f"{address}/32"] for address in ctx.addresses_of_role(rule.source_role or "")]
 
 
-def _match(rule: FirewallRule) -> list[str]:
+def match(rule: FirewallRule) -> list[str]:
+    """Return the iptables match (protocol, ports) of a rule."""
     if rule.protocol == "all":
         return []
     match = ["-p", rule.protocol]

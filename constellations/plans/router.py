@@ -8,15 +8,17 @@ from __future__ import annotations
 
 import ipaddress
 import shlex
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from constellations.plans.base import Action, PlanContext, PlanItem, VpnMaterial
+from constellations.plans.common import match
 from constellations.plans.software import install_wheelhouse
 from provisioners.remote.operations import (
     apply,
     directory,
     file,
     iptables_chain,
+    iptables_chain_exact,
     iptables_rule,
     service,
     sysctl,
@@ -32,6 +34,10 @@ VPN_SERVICE = f"openvpn-server@{VPN_INSTANCE}"
 VPN_SERVER_NAME = "cloudsim-router"  # the CN the app gives the router's certificate
 OPENVPN_DIR = "/etc/openvpn/server"
 PKI_DIR = f"{OPENVPN_DIR}/{VPN_INSTANCE}"
+# root only (/run/openvpn-server is 0710 root): whoever holds it can disconnect anyone
+VPN_MANAGEMENT_SOCKET = f"/run/openvpn-server/{VPN_INSTANCE}-management.sock"
+VPN_STATE_DIR = "/var/lib/cloudsim/vpn"  # written by OpenVPN as nobody: the address pool
+VPN_DISCONNECT_COMMAND = "/usr/local/sbin/cloudsim-vpn-disconnect"
 CSROUTER_VENV = "/opt/csrouter"
 CSROUTER_CONFIG = "/etc/cloudsim/router.json"
 CSROUTER_COMMAND = "/usr/local/sbin/csrouter"
@@ -44,13 +50,7 @@ def router(ctx: PlanContext) -> list[PlanItem]:
     """Forward VPN and LAN traffic; never let the public side into the LAN; run the VPN."""
     items: list[PlanItem] = [
         sysctl({"net.ipv4.ip_forward": 1}, templates=ctx.templates),
-        iptables_chain(FORWARD_CHAIN),
-        iptables_rule(
-            FORWARD_CHAIN, ["-m", "conntrack", "--ctstate", "ESTABLISHED,RELATED", "-j", "ACCEPT"]
-        ),
-        iptables_rule(FORWARD_CHAIN, ["-i", "tun+", "-d", ctx.subnet, "-j", "ACCEPT"]),
-        iptables_rule(FORWARD_CHAIN, ["-s", ctx.subnet, "-j", "ACCEPT"]),
-        iptables_rule(FORWARD_CHAIN, ["-d", ctx.subnet, "-j", "DROP"]),
+        iptables_chain_exact(FORWARD_CHAIN, forward_rules(ctx)),
         iptables_rule("FORWARD", ["-j", FORWARD_CHAIN], insert=True),
     ]
     if ctx.vpn is None:
@@ -66,11 +66,27 @@ def router(ctx: PlanContext) -> list[PlanItem]:
     )
 
 
-def vpn_firewall(ctx: PlanContext, vpn: VpnMaterial) -> list[PlanItem]:
-    """Let VPN clients reach the LAN and nothing else (not the router, not the internet)."""
+def forward_rules(ctx: PlanContext) -> list[list[str]]:
+    """Return the router's forward chain: the LAN goes out, VPN clients reach what the kind's
+    `vpn` list allows (never sim's SSH), the public side never reaches the LAN."""
+    vpn_access = [
+        ["-i", "tun+", "-d", f"{address}/32", *match(rule), "-j", "ACCEPT"]
+        for rule in (ctx.kind.vpn_access if ctx.vpn is not None else ())
+        for address in ctx.addresses_of_role(rule.to_role)
+    ]
     return [
-        iptables_rule(FORWARD_CHAIN, ["-i", "tun+", "-j", "DROP"]),
-        iptables_rule(FORWARD_CHAIN, ["-o", "tun+", "-j", "DROP"]),
+        ["-m", "conntrack", "--ctstate", "ESTABLISHED,RELATED", "-j", "ACCEPT"],
+        *vpn_access,
+        ["-i", "tun+", "-j", "DROP"],
+        ["-s", ctx.subnet, "-j", "ACCEPT"],
+        ["-d", ctx.subnet, "-j", "DROP"],
+        ["-o", "tun+", "-j", "DROP"],
+    ]
+
+
+def vpn_firewall(ctx: PlanContext, vpn: VpnMaterial) -> list[PlanItem]:
+    """Keep VPN clients off the router itself; masquerade them into the LAN."""
+    return [
         iptables_rule("INPUT", ["-i", "tun+", "-j", "DROP"], insert=True),
         # LAN machines accept their LAN only: OCU packets arrive from the router's address
         iptables_rule(
@@ -144,7 +160,12 @@ def csrouter(ctx: PlanContext) -> list[PlanItem]:
 
 
 def vpn_server(ctx: PlanContext) -> list[PlanItem]:
-    """Install the OpenVPN server's configuration and PKI; restart it when they change."""
+    """Install the OpenVPN server's configuration and PKI; restart it when they change.
+
+    A new revocation list does not restart it: OpenVPN re-reads the list at every handshake,
+    and the revoked clients are disconnected one by one over the management socket, so the
+    team's other members stay connected (and keep their addresses).
+    """
     vpn = ctx.vpn
     assert vpn is not None
     network = ipaddress.ip_network(vpn.network)
@@ -161,25 +182,54 @@ def vpn_server(ctx: PlanContext) -> list[PlanItem]:
             "lan_netmask": lan.netmask,
             "pki_dir": PKI_DIR,
             "crl": bool(vpn.crl),
+            "management_socket": VPN_MANAGEMENT_SOCKET,
+            "state_dir": VPN_STATE_DIR,
         },
     )
     drop_in = ctx.templates.render("router/openvpn-after-csrouter.conf.j2", {})
+    disconnect = ctx.templates.render(
+        "router/vpn-disconnect.py.j2", {"management_socket": VPN_MANAGEMENT_SOCKET}
+    )
     operations = [
-        # readable by `nobody`: OpenVPN re-reads the CRL at every connection after dropping root
-        directory(PKI_DIR, mode=0o755),
+        directory(VPN_STATE_DIR, mode=0o700, owner="nobody", group="nogroup"),
         file(f"{PKI_DIR}/ca.crt", vpn.ca_cert),
         file(f"{PKI_DIR}/server.crt", vpn.server_cert),
         file(f"{PKI_DIR}/server.key", vpn.server_key, mode=0o600),
-        *([file(f"{PKI_DIR}/crl.pem", vpn.crl)] if vpn.crl else []),
         file(f"{OPENVPN_DIR}/{VPN_INSTANCE}.conf", config),
         directory(f"{SYSTEMD_DIR}/{VPN_SERVICE}.service.d"),
         file(f"{SYSTEMD_DIR}/{VPN_SERVICE}.service.d/csrouter.conf", drop_in),
     ]
     return [
-        # a restart drops every session, so a revoked certificate stops working at once
+        file(VPN_DISCONNECT_COMMAND, disconnect, mode=0o700),
+        # readable by `nobody`: OpenVPN re-reads the CRL at every connection after dropping root
+        directory(PKI_DIR, mode=0o755),
+        # before the configuration: a (re)started server must already refuse revoked clients
+        *([file(f"{PKI_DIR}/crl.pem", vpn.crl)] if vpn.crl else []),
         _restart_on_change("OpenVPN configuration and PKI", operations, VPN_SERVICE),
         service(VPN_SERVICE, running=True, enabled=True),
+        Action("disconnect revoked VPN clients", _disconnect(vpn.revoked)),
     ]
+
+
+def revocation(vpn: VpnMaterial) -> list[PlanItem]:
+    """Return just what a revocation changes on a running router: the list, the sessions."""
+    return [
+        file(f"{PKI_DIR}/crl.pem", vpn.crl),
+        Action("disconnect revoked VPN clients", _disconnect(vpn.revoked)),
+    ]
+
+
+def _disconnect(names: Sequence[str]) -> Callable[[SSHExecutor, Target], bool]:
+    """Return an action that ends the sessions of these certificate names, if connected."""
+
+    def run(executor: SSHExecutor, target: Target) -> bool:
+        if not names:
+            return False
+        command = shlex.join([VPN_DISCONNECT_COMMAND, *names])
+        result = executor.run(target, command, timeout=30)
+        return "killed" in result.stdout
+
+    return run
 
 
 def _restart_on_change(name: str, steps: Sequence[PlanItem], unit: str) -> Action:

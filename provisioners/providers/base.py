@@ -100,6 +100,10 @@ class CloudSimNodeDriver(NodeDriver):  # type: ignore[misc]
         """Return an argv connecting stdio to ip:port from "the internet", None: from here."""
         return None
 
+    def ex_public_command(self, argv: list[str]) -> list[str] | None:
+        """Return argv wrapped to run on "the internet", None: there is no such place to run."""
+        return None
+
     def ex_ssh_route(self, node: Node) -> Route:
         """Return how the controller reaches node: a public address, else through a jump host."""
         if node.public_ips:

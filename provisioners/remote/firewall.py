@@ -7,6 +7,9 @@ PROTOCOLS = ("tcp", "udp", "icmp", "all")
 PORTED_PROTOCOLS = ("tcp", "udp")
 SOURCE_LAN = "lan"
 SOURCE_ANY = "any"
+# every address outside the constellation's LAN: a security group cannot exclude the LAN, so
+# there it is "any" and the host firewall (which can) leaves the LAN out
+SOURCE_PUBLIC = "public"
 ROLE_SOURCE_PREFIX = "role:"
 MIN_PORT = 0
 MAX_PORT = 65535
@@ -30,8 +33,8 @@ class FirewallRule:
     """Allow traffic from source to the machines of to_role on protocol and ports.
 
     ports is an inclusive (first, last) range, None for all ports; it must be None for icmp
-    and all. source is "lan" (the constellation's subnet), "any" (every address) or
-    "role:NAME" (the machines of role NAME).
+    and all. source is "lan" (the constellation's subnet), "any" (every address), "public"
+    (every address but the LAN's) or "role:NAME" (the machines of role NAME).
     """
 
     to_role: str
@@ -73,10 +76,11 @@ class FirewallRule:
     def _check_source(self) -> None:
         if not isinstance(self.source, str):
             raise ValueError(f"source must be a string, got {self.source!r}")
-        if self.source in (SOURCE_LAN, SOURCE_ANY):
+        if self.source in (SOURCE_LAN, SOURCE_ANY, SOURCE_PUBLIC):
             return
         if not self.source.startswith(ROLE_SOURCE_PREFIX):
             raise ValueError(
-                f"source must be {SOURCE_LAN!r}, {SOURCE_ANY!r} or 'role:NAME', got {self.source!r}"
+                f"source must be {SOURCE_LAN!r}, {SOURCE_ANY!r}, {SOURCE_PUBLIC!r} or 'role:NAME', "
+                f"got {self.source!r}"
             )
         check_role_name("source", self.source_role)

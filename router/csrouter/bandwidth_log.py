@@ -68,6 +68,7 @@ class Bandwidth:
     used_bits: int = 0
     cap_bits: int | None = None
     remaining_bits: int | None = None
+    spent_at: datetime | None = None  # from the final counters: when the cap was spent
 
 
 def read_bandwidth_log(lines: Iterable[str]) -> dict[str, Bandwidth]:
@@ -85,6 +86,11 @@ def read_bandwidth_log(lines: Iterable[str]) -> dict[str, Bandwidth]:
             start = datetime.fromisoformat(record["time"])
             for direction in DIRECTIONS:
                 result[direction].cap_bits = (record.get("caps_bits") or {}).get(direction)
+            continue
+        if record.get("event") == "disarmed":
+            for direction in DIRECTIONS:
+                when = ((record.get("counters") or {}).get(direction) or {}).get("spent_at")
+                result[direction].spent_at = datetime.fromisoformat(when) if when else None
             continue
         direction = record.get("direction")
         if direction not in result or "bytes" not in record:

@@ -46,6 +46,7 @@ class DirectionMeter:
     accepted: Totals = field(default_factory=Totals)
     dropped: Totals = field(default_factory=Totals)
     spent: bool = False
+    spent_at: str | None = None  # when the cap was spent (UTC, ISO 8601); set by the caller
     # this second's share, for the bandwidth log
     second_accepted: Totals = field(default_factory=Totals)
     second_dropped: Totals = field(default_factory=Totals)
@@ -85,6 +86,7 @@ class DirectionMeter:
             "cap_bits": self.cap_bits,
             "remaining_bits": self.remaining_bits,
             "spent": self.spent,
+            "spent_at": self.spent_at,
             "accepted": self.accepted.as_dict(),
             "dropped": self.dropped.as_dict(),
         }
@@ -98,4 +100,5 @@ class DirectionMeter:
             accepted=Totals.from_dict(data["accepted"]),
             dropped=Totals.from_dict(data["dropped"]),
             spent=bool(data["spent"]),
+            spent_at=data.get("spent_at"),
         )

@@ -67,7 +67,11 @@ class OcuPath:
                 self.dropped_while_stopping += 1
                 packet.drop()
                 return
-            if not self.run.meters[direction].admit(measure(packet.get_payload())):
+            meter = self.run.meters[direction]
+            was_spent = meter.spent
+            if not meter.admit(measure(packet.get_payload())):
+                if not was_spent:
+                    meter.spent_at = utc_iso(self._wall())
                 packet.drop()
                 return
             self.lines[direction].hold(packet, arrived + self.run.latency_ms / 1000)
@@ -167,6 +171,7 @@ class OcuPath:
                 "latency_ms": self.run.latency_ms,
                 "caps_bits": {d: self.run.meters[d].cap_bits for d in DIRECTIONS},
                 "spent": {d: self.run.meters[d].spent for d in DIRECTIONS},
+                "spent_at": {d: self.run.meters[d].spent_at for d in DIRECTIONS},
                 "held_packets": {d: len(self.lines[d]) for d in DIRECTIONS},
                 # since the arm: how late csrouter released packets (its own timing error)
                 "release_lateness": {d: self.lines[d].lateness.as_dict() for d in DIRECTIONS},

@@ -23,8 +23,9 @@ EXIT_DAEMON_DOWN = 3
 EXIT_UNHEALTHY = 4  # status: the daemon runs but reports faults (in its --json answer)
 
 # The counters (`counters --json`, `disarm --json`): one object per direction, each with
-# cap_bits, remaining_bits, spent and the "accepted" and "dropped" totals (packets,
-# ip_bytes, payload_bytes). Caps count TCP/UDP payload bits.
+# cap_bits, remaining_bits, spent, spent_at (UTC ISO 8601, null while not spent) and the
+# "accepted" and "dropped" totals (packets, ip_bytes, payload_bytes). Caps count TCP/UDP
+# payload bits.
 TOTALS = ("packets", "ip_bytes", "payload_bytes")
 
 BANDWIDTH_LOG = DEFAULT_BANDWIDTH_LOG
@@ -46,3 +47,8 @@ def arm_args(
 def payload_bits_used(counters: dict[str, Any]) -> dict[str, int]:
     """Return each direction's accepted payload, in bits, from a counters answer."""
     return {d: 8 * int(counters[d]["accepted"]["payload_bytes"]) for d in DIRECTIONS}
+
+
+def spent_at(counters: dict[str, Any]) -> dict[str, str | None]:
+    """Return when each direction's cap was spent (ISO 8601), None where it was not."""
+    return {d: counters[d].get("spent_at") for d in DIRECTIONS}

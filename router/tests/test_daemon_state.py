@@ -46,11 +46,13 @@ def test_a_saved_run_resumes_with_its_counts_and_spent_state(tmp_path: Path) -> 
     run = Run.arm(latency_ms=250, uplink_bits=8000, downlink_bits=None, run_id="r", now=100.0)
     run.meters["uplink"].admit(PacketSize(1028, 1000))
     run.meters["uplink"].admit(PacketSize(28, 1))  # does not fit: spent
+    run.meters["uplink"].spent_at = "2026-11-22T20:00:00.000+00:00"  # the daemon stamps it
     SavedState(run, False, 101.0, ["earlier fault"]).write(str(tmp_path / "state.json"))
     saved = SavedState.read(str(tmp_path / "state.json"))
     assert saved is not None and not saved.clean_exit and saved.faults == ["earlier fault"]
     assert saved.run.counters(102.0) == run.counters(102.0)
     assert saved.run.meters["uplink"].spent and saved.run.counters(102.0)["elapsed_s"] == 2.0
+    assert saved.run.counters(102.0)["uplink"]["spent_at"] == "2026-11-22T20:00:00.000+00:00"
     assert SavedState.read(str(tmp_path / "missing.json")) is None
 
 

@@ -209,3 +209,35 @@ def test_user_update_moves_promotes_and_disables(run: Callable[..., Result]) -> 
     listing = {u["email"]: u for u in json.loads(run("user", "list", "--json").output)}
     assert listing["root@example.org"]["role"] == "admin" and listing["root@example.org"]["active"]
     assert listing["pat@example.org"]["role"] == "officer"
+
+
+def test_ssh_keys_of_a_user_are_added_listed_refused_and_removed(
+    run: Callable[..., Result], tmp_path: Path
+) -> None:
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric import ed25519, rsa
+
+    def public(key: object) -> str:
+        return (
+            key.public_key()
+            .public_bytes(  # type: ignore[attr-defined, no-any-return]
+                serialization.Encoding.OpenSSH, serialization.PublicFormat.OpenSSH
+            )
+            .decode()
+        )
+
+    assert run("team", "create", "Keys").exit_code == 0
+    made = run("user", "create", "--email", "k@example.org", "--team", "Keys")
+    assert made.exit_code == 0, made.output
+    (tmp_path / "id.pub").write_text(public(ed25519.Ed25519PrivateKey.generate()) + " k@laptop\n")
+    added = run("user", "ssh-key", "add", "k@example.org", str(tmp_path / "id.pub"))
+    assert added.exit_code == 0 and "SHA256:" in added.output, added.output
+    [key] = json.loads(run("user", "ssh-key", "list", "k@example.org", "--json").output)
+    (tmp_path / "weak.pub").write_text(public(rsa.generate_private_key(65537, 2048)))
+    refused = run("user", "ssh-key", "add", "k@example.org", str(tmp_path / "weak.pub"))
+    assert refused.exit_code == 1 and "at least 3072" in refused.output
+    generated = run("user", "ssh-key", "add", "k@example.org", "--generate")
+    assert generated.exit_code == 0 and "BEGIN OPENSSH PRIVATE KEY" in generated.output
+    assert run("user", "ssh-key", "remove", "k@example.org", str(key["id"])).exit_code == 0
+    listed = run("user", "ssh-key", "list", "k@example.org").output
+    assert key["fingerprint"] not in listed and "made by CloudSim" in listed

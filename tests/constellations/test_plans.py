@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from constellations.definition import load_kind
 from constellations.plans import PLANS, PlanContext, firewall
+from constellations.plans.common import host_firewall_rules
+from constellations.plans.router import forward_rules
 from provisioners.remote.facts.files import PathState
 from provisioners.remote.operations import Operation
 
@@ -23,27 +25,38 @@ def _context(machine: str) -> PlanContext:
 
 
 def _rules(ctx: PlanContext) -> list[str]:
-    return [op.name for op in firewall(ctx) if isinstance(op, Operation)]
+    return [" ".join(rule) for rule in host_firewall_rules(ctx)]
 
 
-def test_sim_accepts_only_the_lan_then_drops() -> None:
-    rules = _rules(_context("sim"))
-    assert rules[1:3] == [
-        "iptables -t filter CLOUDSIM-IN -i lo -j ACCEPT",
-        "iptables -t filter CLOUDSIM-IN -m conntrack --ctstate ESTABLISHED,RELATED -j ACCEPT",
-    ]
-    assert "iptables -t filter CLOUDSIM-IN -s 10.211.9.0/24 -j ACCEPT" in rules
-    assert not any("--dport 22" in rule and "-s" not in rule for rule in rules)
-    assert rules[-2:] == [
-        "iptables -t filter CLOUDSIM-IN -j DROP",
+def test_the_firewall_chain_is_rewritten_exactly_and_jumped_to() -> None:
+    names = [op.name for op in firewall(_context("sim")) if isinstance(op, Operation)]
+    assert names == [
+        f"iptables -t filter CLOUDSIM-IN: {len(_rules(_context('sim')))} rules",
         "iptables -t filter INPUT -j CLOUDSIM-IN",
     ]
 
 
-def test_router_accepts_ssh_and_vpn_from_anywhere() -> None:
+def test_sim_accepts_ssh_from_the_router_and_its_api_from_the_lan_only() -> None:
+    rules = _rules(_context("sim"))
+    assert rules[:2] == [
+        "-i lo -j ACCEPT",
+        "-m conntrack --ctstate ESTABLISHED,RELATED -j ACCEPT",
+    ]
+    assert "-s 10.211.9.50/32 -p tcp --dport 22 -j ACCEPT" in rules  # CloudSim's path
+    assert "-s 10.211.9.0/24 -p tcp --dport 7700:7701 -j ACCEPT" in rules
+    assert not any("--dport 22" in rule and "10.211.9.0/24" in rule for rule in rules)
+    assert not any(rule == "-s 10.211.9.0/24 -j ACCEPT" for rule in rules)
+    assert rules[-1] == "-j DROP"
+
+
+def test_router_accepts_ssh_from_outside_the_lan_and_vpn_from_anywhere() -> None:
     rules = _rules(_context("router"))
-    assert "iptables -t filter CLOUDSIM-IN -p tcp --dport 22 -j ACCEPT" in rules
-    assert "iptables -t filter CLOUDSIM-IN -p udp --dport 1194 -j ACCEPT" in rules
+    assert "! -s 10.211.9.0/24 -p tcp --dport 22 -j ACCEPT" in rules
+    assert "-p udp --dport 1194 -j ACCEPT" in rules
+
+
+def test_field_computers_accept_the_whole_lan() -> None:
+    assert "-s 10.211.9.0/24 -j ACCEPT" in _rules(_context("fc1"))
 
 
 def test_lan_machines_route_through_the_router_and_know_their_peers() -> None:
@@ -59,7 +72,24 @@ def test_lan_machines_route_through_the_router_and_know_their_peers() -> None:
 def test_router_forwards_vpn_and_lan_but_drops_public_to_lan() -> None:
     names = [item.name for item in PLANS["router"](_context("router"))]
     assert names[0].startswith("sysctl net.ipv4.ip_forward=1")
-    assert "iptables -t filter CLOUDSIM-FWD -i tun+ -d 10.211.9.0/24 -j ACCEPT" in names
-    assert names.index("iptables -t filter CLOUDSIM-FWD -s 10.211.9.0/24 -j ACCEPT") < (
-        names.index("iptables -t filter CLOUDSIM-FWD -d 10.211.9.0/24 -j DROP")
-    )
+    rules = [" ".join(rule) for rule in forward_rules(_context("router"))]
+    assert rules.index("-s 10.211.9.0/24 -j ACCEPT") < rules.index("-d 10.211.9.0/24 -j DROP")
+    assert not any("tun+" in rule and "ACCEPT" in rule for rule in rules)  # no VPN here
+
+
+def test_field_computers_get_the_team_account_with_exactly_the_members_keys() -> None:
+    from dataclasses import replace
+
+    from constellations.plans.roles import team_account
+
+    keys = ("ssh-ed25519 AAAAC3Nza1 alice@example.org", "ssh-ed25519 AAAAC3Nza2 bob@example.org")
+    items = team_account(replace(_context("fc1"), team_keys=keys))
+    names = [item.name for item in items]
+    assert names[0] == "user team" and "absent /etc/sudoers.d/cloudsim-team" in names
+    authorized = next(i for i in items if i.name == "file /home/team/.ssh/authorized_keys")
+    assert isinstance(authorized, Operation)
+    [upload] = authorized.steps(PathState.absent())
+    assert upload.content == (keys[0] + "\n" + keys[1] + "\n").encode()  # type: ignore[attr-defined]
+    assert upload.mode == 0o600 and upload.owner == "team"  # type: ignore[attr-defined]
+    allowed = [i.name for i in team_account(replace(_context("fc1"), team_sudo=True))]
+    assert "file /etc/sudoers.d/cloudsim-team" in allowed

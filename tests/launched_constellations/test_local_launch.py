@@ -36,8 +36,11 @@ def test_two_vrc_constellations_launch_verify_and_terminate_cleanly(
         subnets.add(subnet)
         assert machines["sim"].private_ip.endswith(".51")
         checks = [c for m in machines.values() for c in m.verification["checks"]]
-        assert len(checks) == 10 and all(c["ok"] for c in checks)
-        assert {c["to"] for c in checks if c["expected"] == "closed"} == {"sim", "fc1", "fc2"}
+        assert len(checks) == 18 and all(c["ok"] for c in checks), checks
+        denied = {(c["from"], c["to"], c["port"]) for c in checks if c["expected"] == "closed"}
+        assert {("fc1", "sim", 22), ("fc2", "sim", 22), ("fc1", "router", 22)} <= denied
+        assert {("vpn", "sim", 22), ("vpn", "router", 22)} <= denied  # a VPN client of its own
+        assert any(c.get("after") == "revocation" for c in checks)  # then cut off
         assert machines["sim"].verification["simulator"]["ok"]
     assert len(subnets) == 2
 

@@ -98,5 +98,5 @@ def test_removing_a_user_revokes_their_certificate_and_updates_the_router(
     after = vpn.server_material(ready_vrc)
     ca = pki.CertificateAuthority(after.ca_cert, vpn._ca(ready_vrc).key_pem)
     assert serial in pki.revoked_serials(after.crl, ca)
-    job = db.session.scalar(select(Job).where(Job.kind == "constellation.refresh_vpn"))
+    job = db.session.scalar(select(Job).where(Job.kind == "constellation.refresh_access"))
     assert job is not None and job.target_id == ready_vrc.id

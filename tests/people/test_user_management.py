@@ -57,7 +57,7 @@ def test_the_api_moves_a_user_to_another_team_and_revokes_their_vpn(
     material = vpn.server_material(ready_vrc)
     ca = pki.CertificateAuthority(material.ca_cert, vpn._ca(ready_vrc).key_pem)
     assert serial in pki.revoked_serials(material.crl, ca)
-    job = db.session.scalar(select(Job).where(Job.kind == "constellation.refresh_vpn"))
+    job = db.session.scalar(select(Job).where(Job.kind == "constellation.refresh_access"))
     assert job is not None and job.target_id == ready_vrc.id
     event = db.session.scalar(select(AuditEvent).where(AuditEvent.action == "user.update"))
     assert event is not None and event.details["team"] == team_b

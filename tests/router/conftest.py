@@ -21,13 +21,14 @@ from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from libcloud.compute.base import Node, NodeAuthSSHKey
 
-from constellations.definition import load_kind
+from constellations.definition import ConstellationKind, load_kind
 from constellations.plans import PLANS, PlanContext, PlanItem, firewall
 from constellations.plans.base import Action, VpnMaterial
 from constellations.plans.router import VPN_SERVER_NAME, router
 from constellations.plans.software import build_wheelhouse, distribution_source
 from provisioners.providers.local.driver import LocalNodeDriver
 from provisioners.remote import pki
+from provisioners.remote.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule
 from provisioners.remote.operations import MachineTemplates, apply
 from provisioners.remote.ssh import CommandResult, ConnectPolicy, HostKeys, SSHExecutor
 from provisioners.remote.ssh import Machine as Target
@@ -95,7 +96,7 @@ class RouterLab:
     def vpn_material(self, revoked: list[int]) -> VpnMaterial:
         """Return the router's VPN material with a CRL revoking these serials."""
         server = self.clients["server"]
-        # one CRL per revocation list: a re-issued CRL differs (dates) and restarts the VPN
+        # one CRL per revocation list: a re-issued one differs (its dates) and is pushed again
         key = tuple(sorted(revoked))
         self.crls.setdefault(key, pki.issue_crl(self.ca, key))
         return VpnMaterial(
@@ -104,6 +105,7 @@ class RouterLab:
             server_key=server.key_pem,
             crl=self.crls[key],
             network=VPN_NETWORK,
+            revoked=tuple(c.common_name for c in self.clients.values() if c.serial in key),
         )
 
     def start_client(self, user: str) -> None:
@@ -236,8 +238,20 @@ def tear_down(driver: LocalNodeDriver, executor: SSHExecutor, scratch: Path) -> 
         raise failures[0]
 
 
-def _build_lab(driver: LocalNodeDriver, executor: SSHExecutor, scratch: Path) -> RouterLab:
+def lab_kind() -> ConstellationKind:
+    """The vrc kind with its sim open to the OCU and the LAN: this lab's "sim" stands for any
+    LAN machine the OCU talks to (the vrc seal itself is checked in tests/fleet)."""
     kind = load_kind("vrc", set(PLANS))
+    everything = FirewallRule(to_role="sim", protocol="all", ports=None, source=SOURCE_LAN)
+    return replace(
+        kind,
+        firewall=(*kind.firewall, everything),
+        vpn_access=(*kind.vpn_access, replace(everything, source=SOURCE_ANY)),
+    )
+
+
+def _build_lab(driver: LocalNodeDriver, executor: SSHExecutor, scratch: Path) -> RouterLab:
+    kind = lab_kind()
     lan = driver.ex_create_network(f"{PREFIX}-lan")
     router_ip = kind.machine("router").address(lan.cidr)
     # the LAN's default gateway is the router, as the common plan would make it

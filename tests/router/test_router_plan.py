@@ -11,7 +11,7 @@ from csrouter.rules import queue_rules as daemon_queue_rules
 from constellations.definition import load_kind
 from constellations.plans import PLANS, PlanContext
 from constellations.plans.base import Action, VpnMaterial
-from constellations.plans.router import queue_rules, router
+from constellations.plans.router import forward_rules, queue_rules, router
 from provisioners.remote import pki
 from provisioners.remote.operations import MachineTemplates, Operation
 
@@ -60,11 +60,19 @@ def test_the_vpn_plan_drops_everything_but_the_lan_for_clients(
     (tmp_path / "SHA256SUMS").write_text("")
     items = router(context(material, tmp_path))
     names = [item.name for item in items if isinstance(item, Operation)]
-    assert "iptables -t filter CLOUDSIM-FWD -i tun+ -j DROP" in names
+    rules = [" ".join(rule) for rule in forward_rules(context(material, tmp_path))]
+    # the OCU reaches the field computers (everything) and sim's API ports, nothing else
+    assert rules[1:5] == [
+        "-i tun+ -d 10.215.7.52/32 -j ACCEPT",
+        "-i tun+ -d 10.215.7.53/32 -j ACCEPT",
+        "-i tun+ -d 10.215.7.51/32 -p tcp --dport 7700:7701 -j ACCEPT",
+        "-i tun+ -j DROP",
+    ]
     assert "iptables -t filter INPUT -i tun+ -j DROP" in names
     assert any("NFQUEUE --queue-num 0" in name and "-t raw" in name for name in names)
     assert any(isinstance(item, Action) and "OpenVPN" in item.name for item in items)
     assert names[-1] == "service openvpn-server@cloudsim (running, enabled)"
+    assert isinstance(items[-1], Action) and "disconnect revoked" in items[-1].name
 
 
 def test_the_client_template_inlines_the_bundle(material: VpnMaterial) -> None:
@@ -96,7 +104,11 @@ def test_the_bundle_readme_lists_the_lan_machines() -> None:
             "remote_host": "198.51.100.7",
             "remote_port": 1194,
             "lan_addresses": {"sim": "10.0.0.51", "fc1": "10.0.0.52"},
+            "field_computers": {"fc1": "10.0.0.52"},
+            "team_user": "team",
+            "ssh_config": "Host alpha-fc1",
         },
     )
     assert "sudo openvpn --config alpha.ovpn" in text
+    assert "ssh team@10.0.0.52" in text and "Host alpha-fc1" in text
     assert "    sim      10.0.0.51\n    fc1      10.0.0.52\n" in text

@@ -14,6 +14,7 @@ import pytest
 from flask import Flask
 
 from cloudsim.auth.policy import SYSTEM
+from cloudsim.auth.ssh_keys import generate_key
 from cloudsim.auth.tokens import issue_token
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
@@ -35,6 +36,8 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("auth.change_password", "POST"): (LOGIN, 400, 400, 400, 400),
     ("auth.create_token", "POST"): (LOGIN, 400, 400, 400, 400),
     ("auth.revoke", "POST"): (LOGIN, 302, 404, 404, 404),  # only user_a's own token
+    ("auth.add_ssh_key", "POST"): (LOGIN, 400, 400, 400, 400),  # an empty key
+    ("auth.delete_ssh_key", "POST"): (LOGIN, 302, 404, 404, 404),  # only user_a's own key
     # web: dashboard, people
     ("dashboard.index", "GET"): (LOGIN, 200, 200, 200, 200),
     ("people.teams", "GET"): (LOGIN, 403, 403, 200, 200),
@@ -56,6 +59,7 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("constellations.terminate", "POST"): (LOGIN, 403, 403, 403, 302),
     ("constellations.retry", "POST"): (LOGIN, 403, 403, 403, 409),  # it is not in error
     ("constellations.ssh_bundle", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("constellations.team_sudo", "POST"): (LOGIN, 403, 403, 302, 302),
     # a team user's own VPN bundle: the fixture's constellation has no router address yet (409);
     # officers and admins are no team members (400) but may ask for a member's
     # (see tests/launched_constellations)
@@ -72,6 +76,9 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_account.Tokens", "GET"): (401, 200, 200, 200, 200),
     ("api_account.Tokens", "POST"): (401, 201, 201, 201, 201),
     ("api_account.TokenById", "DELETE"): (401, 204, 404, 404, 404),
+    ("api_account.SshKeys", "GET"): (401, 200, 200, 200, 200),
+    ("api_account.SshKeys", "POST"): (401, 201, 201, 201, 201),
+    ("api_account.SshKeyById", "DELETE"): (401, 204, 404, 404, 404),
     ("api_people.Teams", "GET"): (401, 200, 200, 200, 200),
     ("api_people.Teams", "POST"): (401, 403, 403, 201, 201),
     ("api_people.TeamById", "GET"): (401, 200, 404, 200, 200),
@@ -89,6 +96,7 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_constellations.Constellations", "GET"): (401, 200, 200, 200, 200),
     ("api_constellations.Constellations", "POST"): (401, 403, 403, 403, 202),
     ("api_constellations.ConstellationById", "GET"): (401, 200, 404, 200, 200),
+    ("api_constellations.ConstellationById", "PATCH"): (401, 403, 403, 200, 200),
     ("api_constellations.ConstellationById", "DELETE"): (401, 403, 403, 403, 202),
     ("api_constellations.Retry", "POST"): (401, 403, 403, 403, 409),
     ("api_constellations.SshBundle", "GET"): (401, 403, 403, 200, 200),
@@ -138,6 +146,8 @@ def _bodies(team_id: int) -> dict[tuple[str, str], Callable[[], dict[str, Any]]]
     """Valid JSON bodies, so that the API's answers show authorization, not validation."""
     return {
         ("api_account.Tokens", "POST"): lambda: {"name": "matrix"},
+        ("api_account.SshKeys", "POST"): lambda: {"generate": True},
+        ("api_constellations.ConstellationById", "PATCH"): lambda: {"team_sudo": True},
         ("api_people.Teams", "POST"): lambda: {"name": f"Matrix {next(_seq)}"},
         ("api_people.TeamById", "PATCH"): lambda: {"name": "Team A"},
         ("api_people.Users", "POST"): lambda: {
@@ -200,6 +210,8 @@ def _url(
         values["user_id"] = make_user(Role.USER, team_a).id
     if "token_id" in rule.arguments:
         values["token_id"] = issue_token(user_a, "victim").token.id
+    if "key_id" in rule.arguments:
+        values["key_id"] = generate_key(user_a, "victim").key.id
     if "job_id" in rule.arguments:
         values["job_id"] = job_id
     if "ref" in rule.arguments:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from xml.etree.ElementTree import Element
 
 from provisioners.providers.ec2.api import items, text
-from provisioners.remote.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule
+from provisioners.remote.firewall import SOURCE_ANY, SOURCE_LAN, SOURCE_PUBLIC, FirewallRule
 
 ANY_IPV4 = "0.0.0.0/0"
 ALL_PROTOCOLS = "-1"
@@ -51,7 +51,8 @@ def rule_permission(rule: FirewallRule, lan_cidr: str, group_ids: Mapping[str, s
     from_port, to_port = ports if ports is not None else (None, None)
     if rule.source == SOURCE_LAN:
         return Permission(protocol, from_port, to_port, cidr=lan_cidr)
-    if rule.source == SOURCE_ANY:
+    if rule.source in (SOURCE_ANY, SOURCE_PUBLIC):
+        # a group cannot leave the LAN out of "public": the host firewall does
         return Permission(protocol, from_port, to_port, cidr=ANY_IPV4)
     source_role = rule.source_role
     if source_role is None or source_role not in group_ids:

@@ -153,6 +153,15 @@ class LocalNodeDriver(CloudSimNodeDriver):
             self._networks.public_switch_netns, str(parse_address(ip)), port
         )
 
+    @requires_root
+    def ex_public_command(self, argv: list[str]) -> list[str]:
+        """Return argv wrapped to run on "the internet" (in the public network's namespace)."""
+        if not netns.namespace_exists(self._networks.public_switch_netns):
+            raise NetworkNotFoundError(
+                "there is no public network: no node of this prefix has ex_public=True"
+            )
+        return ["nsenter", f"--net={netns.netns_path(self._networks.public_switch_netns)}", *argv]
+
     # -- nodes ---------------------------------------------------------------------------------
 
     @requires_root

@@ -84,3 +84,40 @@ class IptablesChainFact(Fact[bool]):
     def parse(self, stdout: str, exit_code: int) -> bool:
         """Return whether the chain is among the listed names."""
         return self.chain in stdout.splitlines()
+
+
+@dataclass(frozen=True)
+class IptablesChainRulesFact(Fact["tuple[bool, ...] | None"]):
+    """Whether a chain holds exactly these rules: None without the chain, else for each rule
+    whether it is in the chain, followed by False when the chain holds any other rule."""
+
+    table: str
+    chain: str
+    rules: tuple[tuple[str, ...], ...]
+    ipv6: bool = False
+
+    def __post_init__(self) -> None:
+        check_table(self.table)
+        check_chain_name(self.chain)
+
+    @property
+    def command(self) -> str:
+        """Return one line per rule (1 present, 0 not) and then the chain's rule count."""
+        prefix = iptables_prefix(self.table, self.ipv6)
+        chain = shlex.quote(self.chain)
+        checks = "".join(
+            f"{prefix} -C {chain} {shlex.join(rule)} 2>/dev/null && echo 1 || echo 0; "
+            for rule in self.rules
+        )
+        return (
+            f"if {prefix} -S {chain} >/dev/null 2>&1; then {checks}"
+            f"{prefix} -S {chain} | grep -c '^-A' || true; fi"
+        )
+
+    def parse(self, stdout: str, exit_code: int) -> tuple[bool, ...] | None:
+        """Return each rule's presence, then whether the chain holds nothing else."""
+        lines = stdout.split()
+        if not lines:
+            return None
+        present = tuple(line == "1" for line in lines[: len(self.rules)])
+        return (*present, int(lines[-1]) == len(self.rules))

@@ -11,8 +11,12 @@ from provisioners.remote.operations.base import (
 )
 from provisioners.remote.operations.deploy import Deploy
 from provisioners.remote.operations.errors import DeployFailed, OperationError, TemplateError
-from provisioners.remote.operations.files import directory, file, template
-from provisioners.remote.operations.iptables import iptables_chain, iptables_rule
+from provisioners.remote.operations.files import absent, directory, file, template
+from provisioners.remote.operations.iptables import (
+    iptables_chain,
+    iptables_chain_exact,
+    iptables_rule,
+)
 from provisioners.remote.operations.packages import deb_packages
 from provisioners.remote.operations.routes import default_route
 from provisioners.remote.operations.services import service
@@ -31,6 +35,7 @@ __all__ = [
     "Step",
     "TemplateError",
     "Upload",
+    "absent",
     "apply",
     "authorized_key",
     "deb_packages",
@@ -38,6 +43,7 @@ __all__ = [
     "directory",
     "file",
     "iptables_chain",
+    "iptables_chain_exact",
     "iptables_rule",
     "plan_on",
     "service",

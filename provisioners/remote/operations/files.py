@@ -93,6 +93,17 @@ def file(
     return Operation(f"file {path}", (PathFact(path, checksum=True),), plan)
 
 
+def absent(path: str) -> Operation:
+    """Ensure nothing is at path (a file or an empty directory's place)."""
+    _check_absolute(path)
+
+    def plan(state: PathState) -> Iterator[Step]:
+        if state.kind is not None:
+            yield Command(f"rm -f -- {shlex.quote(path)}")
+
+    return Operation(f"absent {path}", (PathFact(path),), plan)
+
+
 def template(
     path: str,
     template_name: str,

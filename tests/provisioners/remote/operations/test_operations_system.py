@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 from pathlib import Path
 from typing import TypeVar
@@ -23,11 +24,13 @@ from provisioners.remote.facts import (
 )
 from provisioners.remote.operations import (
     Command,
+    Operation,
     OperationError,
     Upload,
     authorized_key,
     deb_packages,
     iptables_chain,
+    iptables_chain_exact,
     iptables_rule,
     service,
     sysctl,
@@ -237,3 +240,39 @@ def test_authorized_keys_fact_reads_a_file(tmp_path: Path) -> None:
     assert state == AuthorizedKeysState(str(keys), "root", True, KEY + "\n")
     absent = read_locally(AuthorizedKeysFact("root", str(tmp_path / "nowhere" / "keys")))
     assert (absent.directory_exists, absent.content) == (False, None)
+
+
+def test_an_exact_chain_is_rewritten_in_one_go_only_when_it_differs() -> None:
+    """In a network namespace of its own: an old, wider rule is taken out; then no change."""
+    netns = f"cs-exact-{os.getpid()}"
+    subprocess.run(["ip", "netns", "add", netns], check=True)
+    try:
+
+        def shell(command: str) -> subprocess.CompletedProcess[str]:
+            return subprocess.run(
+                ["ip", "netns", "exec", netns, "sh", "-c", command],
+                capture_output=True,
+                text=True,
+                check=False,
+            )
+
+        def state(operation: Operation) -> object:
+            fact = operation.facts[0]
+            done = shell(fact.command)
+            return fact.parse(done.stdout, done.returncode)
+
+        ssh = ["!", "-s", "10.0.0.0/24", "-p", "tcp", "--dport", "22", "-j", "ACCEPT"]
+        noted = ["-m", "comment", "--comment", "the team VPN", "-j", "ACCEPT"]
+        rules = [ssh, noted, ["-j", "DROP"]]
+        operation = iptables_chain_exact("CS-IN", rules)
+        assert state(operation) is None  # no chain yet
+        shell("iptables -N CS-IN && iptables -A CS-IN -s 10.0.0.0/24 -j ACCEPT")
+        [step] = operation.steps(state(operation))
+        assert isinstance(step, Command)
+        assert shell(step.text).returncode == 0
+        listing = shell("iptables -S CS-IN").stdout
+        assert "-A CS-IN -s 10.0.0.0/24 -j ACCEPT" not in listing
+        assert "! -s 10.0.0.0/24" in listing and "the team VPN" in listing
+        assert operation.steps(state(operation)) == []
+    finally:
+        subprocess.run(["ip", "netns", "del", netns], check=False)

@@ -1,0 +1,180 @@
+"""Verification's own VPN client: from the public side it connects to the router, checks the
+kind's `vpn` reachability rows, is revoked, and must then be cut off."""
+
+from __future__ import annotations
+
+import secrets
+import subprocess
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from cloudsim.extensions import db
+from cloudsim.launched_constellations import vpn
+from cloudsim.models import Constellation
+from constellations.definition import VPN, Reachability
+from constellations.plans.base import Action
+from constellations.plans.router import revocation
+from provisioners.remote.operations import apply
+from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import SSHExecutor
+
+# the provider's way to run argv on "the internet"; None: it has no such place
+PublicCommand = Callable[[list[str]], list[str] | None]
+There = Callable[[list[str]], list[str]]
+CONNECT_SECONDS = 45
+CUT_SECONDS = 20
+PROBE_SECONDS = 3
+
+
+def check_vpn(
+    executor: SSHExecutor,
+    constellation: Constellation,
+    rows: list[Reachability],
+    router: Target,
+    public_command: PublicCommand,
+    log: Callable[[str], None],
+) -> list[dict[str, Any]]:
+    """Return a result per `vpn` row (and one for the revocation), as verify stores them."""
+    rows = [row for row in rows if row.source == VPN]
+    if not rows:
+        return []
+    if public_command(["true"]) is None:
+        log("VPN checks skipped: this provider offers no vantage point on the public side")
+        return [_result(row, None) for row in rows]
+    there = _strict(public_command)
+    name = f"cloudsim-verify-{secrets.token_hex(4)}"
+    issued = vpn.issue_check_certificate(constellation, name)
+    config = vpn.client_config(constellation, name, issued.cert_pem, issued.key_pem)
+    private = {c.target: _address(constellation, c.target) for c in rows}
+    with tempfile.TemporaryDirectory(prefix="cloudsim-vpncheck-") as folder:
+        path = Path(folder) / "check.ovpn"
+        path.touch(mode=0o600)
+        path.write_text(config)
+        device = f"tunvc{secrets.token_hex(3)}"  # unique: other checks may run beside it
+        # routes by device, not via the VPN's gateway address: another check's client (another
+        # constellation, the same VPN network) may sit in the same namespace
+        argv = ["openvpn", "--config", str(path), "--dev", device, "--route-noexec"]
+        client = _Client(there(argv))
+        try:
+            if not client.wait_connected(CONNECT_SECONDS):
+                log(f"VPN check client did not connect: {client.tail()}")
+                return [_result(row, False) for row in rows]
+            route = ["ip", "route", "replace", constellation.resources["subnet"], "dev", device]
+            subprocess.run(there(route), check=True, capture_output=True, timeout=30)
+            results = [_result(row, _reaches(there, private[row.target], row.port)) for row in rows]
+            cut = _revoke_and_expect_cut(
+                executor, constellation, router, issued, name, there, rows, private
+            )
+            return [*results, cut]
+        finally:
+            client.stop()
+
+
+def _revoke_and_expect_cut(
+    executor: SSHExecutor,
+    constellation: Constellation,
+    router: Target,
+    issued: Any,
+    name: str,
+    there: There,
+    rows: list[Reachability],
+    private: dict[str, str],
+) -> dict[str, Any]:
+    """Revoke the check's certificate on the router; it must lose the LAN within seconds."""
+    vpn.revoke_certificate(constellation, issued.serial, name)
+    db.session.flush()  # committed with the launch job (the key itself was never stored)
+    for item in revocation(vpn.server_material(constellation)):
+        if isinstance(item, Action):
+            item.run(executor, router)
+        else:
+            apply(executor, router, item)
+    open_row = next((r for r in rows if r.allowed), rows[0])
+    deadline = time.monotonic() + CUT_SECONDS
+    cut = False
+    while time.monotonic() < deadline and not cut:
+        cut = not _reaches(there, private[open_row.target], open_row.port)
+    return {
+        "from": VPN,
+        "to": open_row.target,
+        "port": open_row.port,
+        "expected": "closed",
+        "seen": "closed" if cut else "open",
+        "ok": cut,
+        "after": "revocation",
+    }
+
+
+def _strict(public_command: PublicCommand) -> There:
+    """Return public_command for a provider known to have a public side."""
+
+    def there(argv: list[str]) -> list[str]:
+        wrapped = public_command(argv)
+        assert wrapped is not None  # checked once before
+        return wrapped
+
+    return there
+
+
+def _address(constellation: Constellation, machine: str) -> str:
+    return next(m.private_ip or "" for m in constellation.machines if m.name == machine)
+
+
+def _result(row: Reachability, connected: bool | None) -> dict[str, Any]:
+    return {
+        "from": row.source,
+        "to": row.target,
+        "port": row.port,
+        "expected": "open" if row.allowed else "closed",
+        "seen": "not checked" if connected is None else ("open" if connected else "closed"),
+        "ok": connected is None or connected == row.allowed,
+    }
+
+
+def _reaches(there: There, address: str, port: int) -> bool:
+    """Return True when the public side, through the VPN, reaches address:port (refused counts:
+    the firewalls drop what they deny)."""
+    probe = f"exec 3<>/dev/tcp/{address}/{port}"
+    argv = there(["timeout", str(PROBE_SECONDS), "bash", "-c", probe])
+    result = subprocess.run(argv, capture_output=True, text=True, check=False, timeout=30)
+    return result.returncode == 0 or "Connection refused" in result.stderr
+
+
+class _Client:
+    """A stock OpenVPN client process, its output read in a thread."""
+
+    def __init__(self, argv: list[str]) -> None:
+        self.process = subprocess.Popen(
+            argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
+        self.lines: list[str] = []
+        self.connected = threading.Event()
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+
+    def _read(self) -> None:
+        assert self.process.stdout is not None
+        for line in self.process.stdout:
+            self.lines.append(line.rstrip())
+            if "Initialization Sequence Completed" in line:
+                self.connected.set()
+
+    def wait_connected(self, seconds: float) -> bool:
+        return self.connected.wait(seconds)
+
+    def tail(self) -> str:
+        return " | ".join(self.lines[-5:])
+
+    def stop(self) -> None:
+        self.process.terminate()
+        try:
+            self.process.wait(10)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait(10)
+        self.reader.join(5)
+        if self.process.stdout is not None:
+            self.process.stdout.close()
