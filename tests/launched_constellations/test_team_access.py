@@ -27,11 +27,12 @@ from cloudsim.people.service import create_team, update_user
 from provisioners.remote.ssh import Machine as Target
 from provisioners.remote.ssh import SSHExecutor
 from tests.competition.support import open_task
-from tests.competition.test_run_e2e import _log_in, browser, live_url  # noqa: F401 (fixtures)
+from tests.competition.test_run_e2e import browser, live_url  # noqa: F401 (fixtures)
 from tests.conftest import make_user, token_for
 from tests.launched_constellations.conftest import finished
 from tests.launched_constellations.test_local_vpn import _download, _ocus, connect
 from tests.support.servers import wait_for
+from tests.web.test_browser import log_in_page
 
 pytestmark = [pytest.mark.hosts, pytest.mark.browser]
 HERE = Path(__file__).parent
@@ -71,7 +72,7 @@ def test_a_team_logs_in_deploys_its_code_and_scores_while_sim_stays_sealed(
     # alice adds her key in Chromium, on her account page; bob and eve with the API
     keys = {name: generate_keypair(name) for name in ("alice", "bob", "eve")}
     page = browser.new_context().new_page()
-    _log_in(page, live_url, alice)
+    log_in_page(page, live_url, alice)
     page.goto(f"{live_url}/account")
     page.get_by_label("Public key").fill(keys["alice"].public)
     page.get_by_role("button", name="Add key").click()
