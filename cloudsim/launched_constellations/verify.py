@@ -80,9 +80,8 @@ def verify_constellation(
     routers = [m.name for m in kind.machines if "router" in m.plan]
     if routers:
         vpn_rows = [c for c in kind.reachability if c.source == VPN]
-        for seen in check_vpn(
-            executor, constellation, vpn_rows, reach[routers[0]], public_command, ctx.log
-        ):
+        router = reach[routers[0]]
+        for seen in check_vpn(executor, constellation, vpn_rows, router, public_command, ctx):
             results[seen["to"]]["checks"].append(seen)
             if not seen["ok"]:
                 failures.append(

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from cloudsim.extensions import db
+from cloudsim.jobs.runner import JobContext
 from cloudsim.launched_constellations import vpn
 from cloudsim.models import Constellation
 from constellations.definition import VPN, Reachability
@@ -36,14 +36,14 @@ def check_vpn(
     rows: list[Reachability],
     router: Target,
     public_command: PublicCommand,
-    log: Callable[[str], None],
+    ctx: JobContext,
 ) -> list[dict[str, Any]]:
     """Return a result per `vpn` row (and one for the revocation), as verify stores them."""
     rows = [row for row in rows if row.source == VPN]
     if not rows:
         return []
     if public_command(["true"]) is None:
-        log("VPN checks skipped: this provider offers no vantage point on the public side")
+        ctx.log("VPN checks skipped: this provider offers no vantage point on the public side")
         return [_result(row, None) for row in rows]
     there = _strict(public_command)
     name = f"cloudsim-verify-{secrets.token_hex(4)}"
@@ -61,13 +61,13 @@ def check_vpn(
         client = _Client(there(argv))
         try:
             if not client.wait_connected(CONNECT_SECONDS):
-                log(f"VPN check client did not connect: {client.tail()}")
+                ctx.log(f"VPN check client did not connect: {client.tail()}")
                 return [_result(row, False) for row in rows]
             route = ["ip", "route", "replace", constellation.resources["subnet"], "dev", device]
             subprocess.run(there(route), check=True, capture_output=True, timeout=30)
             results = [_result(row, _reaches(there, private[row.target], row.port)) for row in rows]
             cut = _revoke_and_expect_cut(
-                executor, constellation, router, issued, name, there, rows, private
+                ctx, executor, constellation, router, issued, name, there, rows, private
             )
             return [*results, cut]
         finally:
@@ -75,6 +75,7 @@ def check_vpn(
 
 
 def _revoke_and_expect_cut(
+    ctx: JobContext,
     executor: SSHExecutor,
     constellation: Constellation,
     router: Target,
@@ -86,7 +87,7 @@ def _revoke_and_expect_cut(
 ) -> dict[str, Any]:
     """Revoke the check's certificate on the router; it must lose the LAN within seconds."""
     vpn.revoke_certificate(constellation, issued.serial, name)
-    db.session.flush()  # committed with the launch job (the key itself was never stored)
+    ctx.checkpoint()  # the list goes to the router now: record it now (and let go of SQLite)
     for item in revocation(vpn.server_material(constellation)):
         if isinstance(item, Action):
             item.run(executor, router)
