@@ -11,6 +11,7 @@ from __future__ import annotations
 import shlex
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from datetime import timedelta
 
 from flask import current_app
@@ -22,7 +23,7 @@ from cloudsim.competition.runs import start_run
 from cloudsim.competition.schedule import TaskSpec, schedule
 from cloudsim.config import Config
 from cloudsim.extensions import db
-from cloudsim.jobs.runner import JobContext, job_kind
+from cloudsim.jobs.runner import JobContext, Payload, job_kind
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Constellation, ConstellationState, Job, Run, RunState, Task, utcnow
 
@@ -47,21 +48,25 @@ def schedule_demo(team_id: int, constellation_id: int) -> Job:
             timeout_s=DEMO_SECONDS,
         )
         [task] = schedule(SYSTEM, spec, [team_id])
-    return enqueue(
-        "competition.demo",
-        SYSTEM,
-        target_type="task",
-        target_id=task.id,
-        team_id=team_id,
-        params={"constellation_id": constellation_id},
-    )
+    return enqueue("competition.demo", SYSTEM, DemoJob(task.id, constellation_id), team_id=team_id)
 
 
-@job_kind("competition.demo")
-def run_demo(ctx: JobContext) -> None:
+@dataclass(frozen=True)
+class DemoJob(Payload):
+    """The demo job's payload: the demo task and the constellation to run it on."""
+
+    task_id: int
+    constellation_id: int
+
+    def about(self) -> tuple[str, int]:
+        return ("task", self.task_id)
+
+
+@job_kind("competition.demo", payload=DemoJob)
+def run_demo(ctx: JobContext, job: DemoJob) -> None:
     """Wait for the constellation, start the demo run, start the example controller on fc1."""
-    task = ctx.target(Task)
-    constellation_id = int(ctx.job.params["constellation_id"])
+    task = ctx.load(Task, job.task_id)
+    constellation_id = job.constellation_id
     ctx.stage("constellation", 10)
     _await(ctx, lambda: _ready(constellation_id), "the constellation to be ready")
     run = db.session.scalar(select(Run).where(Run.task_id == task.id).order_by(Run.id.desc()))

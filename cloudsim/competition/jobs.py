@@ -29,6 +29,7 @@ from cloudsim.competition.artifacts import (
     run_dir,
     snapshot_bandwidth_log,
 )
+from cloudsim.competition.lifecycle import RunJob
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
@@ -114,10 +115,6 @@ def machines(
         )
 
 
-def _run(ctx: JobContext) -> Run:
-    return ctx.target(Run)
-
-
 def simulator_command(run: Run, sim_ip: str, allow: list[str]) -> str:
     """Return the shell command that starts the run's simulator as a transient service."""
     task = run.task
@@ -150,10 +147,10 @@ def _allowed_networks(run: Run) -> list[str]:
     return [n for n in networks if n]
 
 
-@job_kind("run.start")
-def start_run_job(ctx: JobContext) -> None:
+@job_kind("run.start", payload=RunJob)
+def start_run_job(ctx: JobContext, job: RunJob) -> None:
     """Arm the router and start the simulator; the run is then `running` until the beat ends it."""
-    run = _run(ctx)
+    run = ctx.load(Run, job.run_id)
     if run.state != RunState.STARTING:
         ctx.log(f"run {run.id} is {run.state.value}; nothing to start")
         return
@@ -173,7 +170,7 @@ def start_run_job(ctx: JobContext) -> None:
             current_run.announce(reach.executor, reach.field_computers, run, reach.sim_ip)
     except (CloudSimError, SSHError, ValueError) as exc:
         db.session.rollback()
-        run = _run(ctx)
+        run = ctx.load(Run, job.run_id)
         lifecycle.start_failed(run, f"starting failed at the {ctx.job.stage} stage: {exc}")
         ctx.log(f"start failed ({exc}); stopping what was started")
         ctx.checkpoint()  # the stopping state and the stop job survive this job's failure
@@ -200,10 +197,10 @@ def _start_simulator(reach: Machines, run: Run) -> None:
     )
 
 
-@job_kind("run.stop")
-def stop_run_job(ctx: JobContext) -> None:
+@job_kind("run.stop", payload=RunJob)
+def stop_run_job(ctx: JobContext, job: RunJob) -> None:
     """Stop the simulator, disarm the router, collect and score the logs, finish the run."""
-    run = _run(ctx)
+    run = ctx.load(Run, job.run_id)
     if run.state in (RunState.FINISHED, RunState.ERROR):
         ctx.log(f"run {run.id} is {run.state.value} already")
         return
@@ -221,7 +218,7 @@ def stop_run_job(ctx: JobContext) -> None:
         problems.append(f"{ctx.job.stage}: {exc}")
     ctx.stage("score", 90)
     score_run(run, store)
-    run = _run(ctx)
+    run = ctx.load(Run, job.run_id)
     error = "; ".join([*problems, *([router_note] if router_note else [])])[:4000] or None
     lifecycle.ended(run, error, failed=bool(problems))
     ctx.log(f"run {run.id} {run.state.value}: {run.score} checkpoint(s), ended by {run.end_reason}")

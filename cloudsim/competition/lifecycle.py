@@ -7,14 +7,26 @@ all of them call here to move the state.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 from sqlalchemy import update
 
 from cloudsim.auth.policy import SYSTEM, Actor
 from cloudsim.extensions import db
+from cloudsim.jobs.runner import Payload
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Run, RunState, utcnow
+
+
+@dataclass(frozen=True)
+class RunJob(Payload):
+    """The payload of every run job: which run."""
+
+    run_id: int
+
+    def about(self) -> tuple[str, int]:
+        return ("run", self.run_id)
 
 
 def new_run(**fields: Any) -> Run:
@@ -24,12 +36,12 @@ def new_run(**fields: Any) -> Run:
 
 def start(actor: Actor, run: Run) -> None:
     """Start the job that starts a new run."""
-    enqueue("run.start", actor, target_type="run", target_id=run.id, team_id=run.team_id)
+    enqueue("run.start", actor, RunJob(run.id), team_id=run.team_id)
 
 
 def enqueue_stop(run: Run) -> None:
     """Start the job that stops a run: the one place it is started from."""
-    enqueue("run.stop", SYSTEM, target_type="run", target_id=run.id, team_id=run.team_id)
+    enqueue("run.stop", SYSTEM, RunJob(run.id), team_id=run.team_id)
 
 
 def request_stop(run: Run, reason: str) -> bool:

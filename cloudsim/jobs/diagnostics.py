@@ -10,13 +10,13 @@ from sqlalchemy import text
 from cloudsim.crypto import keyring
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
-from cloudsim.jobs.runner import JobContext, job_kind
+from cloudsim.jobs.runner import JobContext, Payload, job_kind
 
 MIN_FREE_BYTES = 1 << 30
 
 
 @job_kind("diagnostics", maintenance=True)
-def run_diagnostics(ctx: JobContext) -> None:
+def run_diagnostics(ctx: JobContext, _: Payload) -> None:
     """Check the database, the queue, the keyring and the instance folder's free space."""
     settings = current_app.config["CLOUDSIM"]
     ctx.stage("database", 10)

@@ -5,9 +5,11 @@ from __future__ import annotations
 import logging
 import threading
 import traceback
+import types
 from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass, fields
 from datetime import timedelta
-from typing import TypeVar
+from typing import Any, TypeVar, Union, get_args, get_origin, get_type_hints
 
 from celery import shared_task
 from flask import current_app
@@ -15,15 +17,17 @@ from sqlalchemy import Update, event, func, or_, update
 from sqlalchemy.orm import ORMExecuteState, Session
 from sqlalchemy.orm.attributes import set_committed_value
 
-from cloudsim.errors import CloudSimError, NotFound
+from cloudsim.errors import CloudSimError, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Job, JobState, utcnow
 
 log = logging.getLogger(__name__)
 
-JobFunction = Callable[["JobContext"], None]
+# A body takes its context and its kind's payload (a Payload subclass).
+JobFunction = Callable[["JobContext", Any], None]
 T = TypeVar("T")
 JOB_KINDS: dict[str, JobFunction] = {}
+PAYLOADS: dict[str, type[Payload]] = {}
 # Kinds an admin may start by name (the API's POST /jobs); every other kind is started by the
 # service that owns its rules (launching, runs, ...), never directly.
 MAINTENANCE_KINDS: set[str] = set()
@@ -35,11 +39,70 @@ class JobGone(Exception):
     """The job's row no longer exists."""
 
 
-def job_kind(name: str, *, maintenance: bool = False) -> Callable[[JobFunction], JobFunction]:
-    """Register a function as the body of jobs of this kind; it must be idempotent."""
+@dataclass(frozen=True)
+class Payload:
+    """A job's typed input, stored as JSON on its row; subclasses add plain-valued fields.
+
+    Each field's value is checked against its annotation when the payload is made, so a job
+    with a bad payload is refused at enqueue rather than failing in the worker.
+    """
+
+    def __post_init__(self) -> None:
+        hints = get_type_hints(type(self))
+        for field in fields(self):
+            value = getattr(self, field.name)
+            expected = hints[field.name]
+            if not _is_a(value, expected):
+                wanted = expected.__name__ if isinstance(expected, type) else str(expected)
+                raise InvalidInput(
+                    f"{type(self).__name__}.{field.name} must be {wanted}, not {value!r}"
+                )
+
+    def about(self) -> tuple[str, int] | None:
+        """Return (type, id) of the row the job is about, which the job list shows."""
+        return None
+
+    def to_params(self) -> dict[str, Any]:
+        """Return the payload as the job row's JSON."""
+        return asdict(self)
+
+    @classmethod
+    def from_job(cls: type[P], job: Job) -> P:
+        """Return a job row's payload; rows queued before payloads existed name it by target."""
+        values: dict[str, Any] = dict(job.params or {})
+        if job.target_type is not None:
+            values.setdefault(f"{job.target_type}_id", job.target_id)
+        try:
+            return cls(**{f.name: values[f.name] for f in fields(cls) if f.name in values})
+        except TypeError as exc:
+            problem = f"job {job.id}: its payload does not fit {cls.__name__}: {exc}"
+            raise CloudSimError(problem) from None
+
+
+P = TypeVar("P", bound=Payload)
+
+
+def _is_a(value: object, annotation: Any) -> bool:
+    """Tell whether a plain value fits a payload field's annotation (int, str, X | None, ...)."""
+    if get_origin(annotation) in (Union, types.UnionType):
+        return any(_is_a(value, arm) for arm in get_args(annotation))
+    if annotation is type(None):
+        return value is None
+    if annotation is float:
+        return isinstance(value, int | float) and not isinstance(value, bool)
+    if annotation is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, annotation)
+
+
+def job_kind(
+    name: str, *, payload: type[Payload] = Payload, maintenance: bool = False
+) -> Callable[[JobFunction], JobFunction]:
+    """Register a function as the body of jobs of this kind, taking `payload`; idempotent."""
 
     def register(fn: JobFunction) -> JobFunction:
         JOB_KINDS[name] = fn
+        PAYLOADS[name] = payload
         if maintenance:
             MAINTENANCE_KINDS.add(name)
         return fn
@@ -64,13 +127,13 @@ class JobContext:
         self._pending: list[tuple[dict[str, object], str]] = []
         self._lock = threading.Lock()
 
-    def target(self, model: type[T]) -> T:
-        """Return the row the job works on, of the type its kind expects; fail loudly when the
-        row is gone (a job takes an id and reloads its row, never an object)."""
-        row = db.session.get(model, self.job.target_id)
+    def load(self, model: type[T], row_id: int) -> T:
+        """Return a row the payload names; fail loudly when it is gone (a job takes an id and
+        reloads its row, never an object)."""
+        row = db.session.get(model, row_id)
         if row is None:
             noun = getattr(model, "__tablename__", model.__name__).rstrip("s")
-            raise NotFound(f"{noun} {self.job.target_id} no longer exists")
+            raise NotFound(f"{noun} {row_id} no longer exists")
         return row
 
     def mask(self, *secrets: str) -> None:
@@ -244,7 +307,7 @@ def run_job(self: object, job_id: str) -> str:
     try:
         if body is None:
             raise CloudSimError(f"unknown job kind {job.kind!r}")
-        body(ctx)
+        body(ctx, PAYLOADS[job.kind].from_job(job))
     except Exception as exc:
         db.session.rollback()
         ctx.flush_reports()

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import logging
 import uuid
+from dataclasses import fields
 from datetime import timedelta
-from typing import Any
 
 from celery import shared_task
 from flask import current_app
@@ -17,7 +17,7 @@ from cloudsim.audit.service import record
 from cloudsim.auth.policy import Actor, require_role, require_team_access
 from cloudsim.errors import InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.jobs.runner import JOB_KINDS, MAINTENANCE_KINDS, run_job
+from cloudsim.jobs.runner import JOB_KINDS, MAINTENANCE_KINDS, PAYLOADS, Payload, run_job
 from cloudsim.models import Job, JobState, Role, utcnow
 
 log = logging.getLogger(__name__)
@@ -25,21 +25,24 @@ UNSENT = "cloudsim.unsent_jobs"  # session.info: ids of jobs to send after the c
 
 
 def enqueue(
-    kind: str,
-    actor: Actor,
-    *,
-    target_type: str | None = None,
-    target_id: int | None = None,
-    team_id: int | None = None,
-    params: dict[str, Any] | None = None,
+    kind: str, actor: Actor, payload: Payload | None = None, *, team_id: int | None = None
 ) -> Job:
     """Add a job to the session; its message is sent once the caller's transaction commits.
 
-    Sending after the commit means a worker never looks for a job row that is not there yet,
-    and a rolled-back job is never sent. If the queue is down, the sweeper sends it later.
+    The payload must be the type the kind declares (none for kinds without one). Sending after
+    the commit means a worker never looks for a job row that is not there yet, and a
+    rolled-back job is never sent. If the queue is down, the sweeper sends it later.
     """
     if kind not in JOB_KINDS:
         raise InvalidInput(f"unknown job kind {kind!r}; known: {', '.join(sorted(JOB_KINDS))}")
+    expected = PAYLOADS[kind]
+    payload = expected() if payload is None and not fields(expected) else payload
+    if type(payload) is not expected:
+        raise InvalidInput(
+            f"a {kind} job takes a {expected.__name__}, not {type(payload).__name__}"
+        )
+    assert payload is not None
+    target_type, target_id = payload.about() or (None, None)
     job_id = str(uuid.uuid4())
     job = Job(
         id=job_id,
@@ -47,7 +50,7 @@ def enqueue(
         target_type=target_type,
         target_id=target_id,
         team_id=team_id,
-        params=params or {},
+        params=payload.to_params(),
         celery_id=job_id,
         created_by_id=actor.id if actor else None,
     )

@@ -30,6 +30,7 @@ from cloudsim.launched_constellations.keys import (
     KeyPair,
     constellation_keypair,
 )
+from cloudsim.launched_constellations.lifecycle import ConstellationJob
 from cloudsim.launched_constellations.service import launched_kind
 from cloudsim.launched_constellations.software import Supply, supply_needs
 from cloudsim.launched_constellations.verify import verify_constellation
@@ -51,14 +52,10 @@ class ProvisioningError(CloudSimError):
     """A stage of a launch or terminate failed; the message says which and why."""
 
 
-def _constellation(ctx: JobContext) -> Constellation:
-    return ctx.target(Constellation)
-
-
-@job_kind("constellation.launch")
-def launch_constellation(ctx: JobContext) -> None:
+@job_kind("constellation.launch", payload=ConstellationJob)
+def launch_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     """Bring a constellation to `ready`, or to `error` with the reason."""
-    constellation = _constellation(ctx)
+    constellation = ctx.load(Constellation, job.constellation_id)
     if constellation.state in (ConstellationState.TERMINATING, ConstellationState.TERMINATED):
         raise ProvisioningError(f"{constellation.name} is {constellation.state.value}")
     config: Config = current_app.config["CLOUDSIM"]
@@ -68,7 +65,7 @@ def launch_constellation(ctx: JobContext) -> None:
         _launch(ctx, constellation, kind, config)
     except Exception as exc:
         db.session.rollback()
-        constellation = _constellation(ctx)
+        constellation = ctx.load(Constellation, job.constellation_id)
         lifecycle.failed(constellation, ctx.masked(f"{ctx.job.stage}: {exc}"))
         ctx.checkpoint()  # the error state survives the runner's rollback
         raise
@@ -125,11 +122,11 @@ def _launch(
         )
 
 
-@job_kind("constellation.refresh_access")
-def refresh_access(ctx: JobContext) -> None:
+@job_kind("constellation.refresh_access", payload=ConstellationJob)
+def refresh_access(ctx: JobContext, job: ConstellationJob) -> None:
     """Push who may come in: the VPN's revocations to the router (ending the revoked sessions
     only) and the team members' SSH keys to the field computers' team account."""
-    constellation = _constellation(ctx)
+    constellation = ctx.load(Constellation, job.constellation_id)
     if constellation.state != ConstellationState.READY:
         ctx.log(
             f"{constellation.name} is {constellation.state.value}: its next launch "
@@ -315,10 +312,10 @@ def _deploy(
     ctx.log(", ".join(f"{name.rsplit('/', 1)[-1]}: {n} changed" for name, n in outcome.items()))
 
 
-@job_kind("constellation.terminate")
-def terminate_constellation(ctx: JobContext) -> None:
+@job_kind("constellation.terminate", payload=ConstellationJob)
+def terminate_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     """Release every resource of a constellation; safe to run again and again."""
-    constellation = _constellation(ctx)
+    constellation = ctx.load(Constellation, job.constellation_id)
     config: Config = current_app.config["CLOUDSIM"]
     lifecycle.terminating(constellation)
     ctx.stage("machines", 10)

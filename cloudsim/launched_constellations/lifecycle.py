@@ -8,20 +8,27 @@ both call here to move the state.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from cloudsim.auth.policy import Actor
+from cloudsim.jobs.runner import Payload
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Constellation, ConstellationState, Job, Machine, MachineState
 
 
+@dataclass(frozen=True)
+class ConstellationJob(Payload):
+    """The payload of every constellation job: which constellation."""
+
+    constellation_id: int
+
+    def about(self) -> tuple[str, int]:
+        return ("constellation", self.constellation_id)
+
+
 def _start_job(actor: Actor, constellation: Constellation, kind: str) -> Job:
     """Enqueue a job about the constellation."""
-    return enqueue(
-        kind,
-        actor,
-        target_type="constellation",
-        target_id=constellation.id,
-        team_id=constellation.team_id,
-    )
+    return enqueue(kind, actor, ConstellationJob(constellation.id), team_id=constellation.team_id)
 
 
 def start_launch(actor: Actor, constellation: Constellation) -> Job:

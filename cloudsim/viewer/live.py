@@ -18,8 +18,9 @@ import redis
 from flask import current_app
 
 from cloudsim.competition.jobs import DRCSIM, machines
+from cloudsim.competition.lifecycle import RunJob
 from cloudsim.config import Config
-from cloudsim.errors import CloudSimError, NotFound, Unavailable
+from cloudsim.errors import CloudSimError, Unavailable
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.jobs.service import enqueue
@@ -89,7 +90,7 @@ def ensure_relay(actor: User, run: Run) -> None:
     """Start the run's relay job unless one is alive (one per run, whoever asks)."""
     client = redis_client()
     if client.set(_key(run.id, "relay"), "starting", nx=True, ex=RELAY_LEASE_S * 3):
-        enqueue("viewer.relay", actor, target_type="run", target_id=run.id, team_id=run.team_id)
+        enqueue("viewer.relay", actor, RunJob(run.id), team_id=run.team_id)
 
 
 def live_frames(run: Run, after: float) -> tuple[list[str], list[dict[str, Any]], str]:
@@ -200,12 +201,10 @@ def follow_simulator(
         return
 
 
-@job_kind("viewer.relay")
-def relay_job(ctx: JobContext) -> None:
+@job_kind("viewer.relay", payload=RunJob)
+def relay_job(ctx: JobContext, job: RunJob) -> None:
     """Follow a running run's poses on its sim machine while anybody watches it live."""
-    run = db.session.get(Run, ctx.job.target_id)
-    if run is None:
-        raise NotFound(f"run {ctx.job.target_id} no longer exists")
+    run = ctx.load(Run, job.run_id)
     config: Config = current_app.config["CLOUDSIM"]
     client = redis_client()
     relay = _Relay(run, client, config)

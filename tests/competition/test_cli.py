@@ -11,7 +11,7 @@ from click.testing import CliRunner, Result
 from flask import Flask
 
 from cloudsim.cli import main
-from cloudsim.competition.demo import DEMO_TASK, schedule_demo
+from cloudsim.competition.demo import DEMO_TASK, DemoJob, schedule_demo
 from cloudsim.extensions import db
 from cloudsim.models import Job, Task, Team
 from tests.support.servers import RedisServer
@@ -66,7 +66,10 @@ def test_tasks_schedule_and_leaderboard_from_the_command_line(
 def test_the_demo_schedules_its_task_once_and_starts_its_job(app: Flask, team_a: Team) -> None:
     first = schedule_demo(team_a.id, 1)
     second = schedule_demo(team_a.id, 1)
-    assert db.session.query(Task).filter_by(name=DEMO_TASK).count() == 1
+    [task] = db.session.query(Task).filter_by(name=DEMO_TASK).all()
     jobs = db.session.query(Job).filter_by(kind="competition.demo").all()
     assert {j.id for j in jobs} == {first.id, second.id}
-    assert all(j.params == {"constellation_id": 1} and j.team_id == team_a.id for j in jobs)
+    assert all(DemoJob.from_job(j) == DemoJob(task.id, 1) for j in jobs)
+    assert all(
+        (j.target_type, j.target_id, j.team_id) == ("task", task.id, team_a.id) for j in jobs
+    )

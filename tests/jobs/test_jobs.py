@@ -14,8 +14,10 @@ from sqlalchemy import select
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
+from cloudsim.errors import InvalidInput
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue, lost_jobs, send, sweep_jobs
+from cloudsim.launched_constellations.lifecycle import ConstellationJob
 from cloudsim.models import Job, JobState, Team, User, utcnow
 from tests.conftest import log_in, running_app
 from tests.support import job_kinds
@@ -75,16 +77,38 @@ def test_a_job_is_sent_only_once_its_transaction_commits(app: Flask, worker: Non
 
 
 def test_reports_never_commit_a_failing_job_body_s_changes(app: Flask, worker: None) -> None:
-    job = finished(enqueue("test.half_done", SYSTEM, params={"team": "half-done"}).id)
+    job = finished(enqueue("test.half_done", SYSTEM, job_kinds.HalfDone("half-done")).id)
     assert job.state == JobState.FAILED and job.error == "failed half-way"
     assert "made a team" in job.log and job.stage == "changing things"
     assert db.session.scalar(select(Team).where(Team.name == "half-done")) is None
 
 
 def test_a_job_whose_row_is_gone_fails_naming_it(app: Flask, worker: None) -> None:
-    job = enqueue("constellation.terminate", SYSTEM, target_type="constellation", target_id=4242)
+    job = enqueue("constellation.terminate", SYSTEM, ConstellationJob(4242))
     ended = finished(job.id)
     assert ended.state == JobState.FAILED and ended.error == "constellation 4242 no longer exists"
+
+
+def test_an_enqueue_with_a_payload_its_kind_does_not_take_is_refused(app: Flask) -> None:
+    before = db.session.query(Job).count()
+    with pytest.raises(InvalidInput, match="takes a ConstellationJob, not HalfDone"):
+        enqueue("constellation.launch", SYSTEM, job_kinds.HalfDone("x"))
+    with pytest.raises(InvalidInput, match="takes a ConstellationJob, not NoneType"):
+        enqueue("constellation.launch", SYSTEM)
+    with pytest.raises(InvalidInput, match="constellation_id must be int"):
+        enqueue("constellation.launch", SYSTEM, ConstellationJob("7"))  # type: ignore[arg-type]
+    assert db.session.query(Job).count() == before
+
+
+def test_a_payload_is_stored_on_the_row_and_names_what_the_job_is_about(app: Flask) -> None:
+    job = enqueue("constellation.terminate", SYSTEM, ConstellationJob(7))
+    assert job.params == {"constellation_id": 7}
+    assert (job.target_type, job.target_id) == ("constellation", 7)
+    assert ConstellationJob.from_job(job) == ConstellationJob(7)
+    # a row queued before payloads existed names its constellation by target only
+    job.params = {}
+    assert ConstellationJob.from_job(job) == ConstellationJob(7)
+    db.session.rollback()
 
 
 def test_a_second_delivery_of_a_finished_job_does_nothing(app: Flask, worker: None) -> None:
@@ -170,9 +194,7 @@ def test_killing_the_worker_mid_job_loses_nothing(
     with running_app(config) as app:
         process = worker_process(config, pytestconfig.rootpath)
         try:
-            job = enqueue(
-                "test.slow", SYSTEM, params={"marker_dir": str(markers), "steps": 6, "seconds": 0.4}
-            )
+            job = enqueue("test.slow", SYSTEM, job_kinds.Slow(str(markers), steps=6, seconds=0.4))
             db.session.commit()
             wait_for(lambda: (markers / "attempt-1").exists(), 60, "the first attempt")
         finally:

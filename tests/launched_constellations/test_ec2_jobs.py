@@ -23,6 +23,7 @@ from cloudsim.launched_constellations.jobs import (
     terminate_constellation,
 )
 from cloudsim.launched_constellations.keys import constellation_keypair
+from cloudsim.launched_constellations.lifecycle import ConstellationJob
 from cloudsim.models import ConstellationState, Job
 from cloudsim.providers.service import configure_provider, open_provider
 from constellations.definition import load_kind
@@ -90,7 +91,9 @@ def test_ec2_network_machines_and_terminate(app: Flask, ec2: None) -> None:
     assert len(provider.nodes("cloud7")) == 4
 
     terminate = service.terminate(SYSTEM, constellation.id)
-    terminate_constellation(JobContext(db.session.get(Job, terminate.id)))  # type: ignore[arg-type]
+    terminate_row = db.session.get(Job, terminate.id)
+    assert terminate_row is not None
+    terminate_constellation(JobContext(terminate_row), ConstellationJob.from_job(terminate_row))
     db.session.commit()  # as the runner does when the body returns
     db.session.refresh(constellation)
     assert constellation.state == ConstellationState.TERMINATED

@@ -10,6 +10,7 @@ from flask import Flask
 from flask.testing import FlaskClient
 
 from cloudsim.auth.policy import SYSTEM
+from cloudsim.competition.lifecycle import RunJob
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
@@ -106,7 +107,7 @@ def test_live_viewers_are_throttled_capped_and_share_one_relay(
         # a relay that fails (here: the run has no constellation to reach) is not restarted
         # at every poll, but after a pause
         with pytest.raises(CloudSimError, match="no longer exists"):
-            relay_job(JobContext(relays[0]))
+            relay_job(JobContext(relays[0]), RunJob.from_job(relays[0]))
         assert redis_client().get(_key(run.id, "relay")) == "failed"
         redis_client().delete(_key(run.id, f"poll:{officers[0].id}:tab1"))
         assert first.get(f"{url}?viewer=tab1").get_json()["relay"] == "failed"
