@@ -1,9 +1,10 @@
 """Live 3D view of a running run: one relay per run, any number of (capped, throttled) viewers.
 
 The relay is a job: over SSH it runs `drcsim watch` on the run's sim machine, which follows the
-simulator's `poses` topic on the LAN and prints frames; the job keeps the newest few seconds in
-Redis. Viewers poll CloudSim for them, so the simulator machine is never exposed to a browser
-and its pose topic has one subscriber however many people watch.
+simulator's `poses` topic on that machine's loopback (ground truth is never published to the
+LAN, where team code runs) and prints frames; the job keeps the newest few seconds in Redis.
+Viewers poll CloudSim for them, so the simulator machine is never exposed to a browser and its
+pose topic has one subscriber however many people watch.
 """
 
 from __future__ import annotations
@@ -173,7 +174,6 @@ class _Relay:
 def follow_simulator(
     executor: SSHExecutor,
     sim: Target,
-    sim_ip: str,
     relay: _Relay,
     *,
     drcsim: str = DRCSIM,
@@ -185,10 +185,8 @@ def follow_simulator(
     The executor's log sink must be `relay.line`: it gets the watcher's output line by line
     as it arrives.
     """
-    command = (
-        f"{shlex.quote(drcsim)} watch --server {shlex.quote(sim_ip)} --port {port} "
-        f"--rate {relay.hz} --seconds {chunk_s}"
-    )
+    # `drcsim watch` reads the simulator's loopback-only topics port, derived from `port`
+    command = f"{shlex.quote(drcsim)} watch --port {port} --rate {relay.hz} --seconds {chunk_s}"
     try:
         while True:
             relay.check()
@@ -211,7 +209,7 @@ def relay_job(ctx: JobContext, job: RunJob) -> None:
     ctx.stage("relay", 50)
     try:
         with machines(run, config, sink=relay.line) as reach:
-            follow_simulator(reach.executor, reach.sim, reach.sim_ip, relay)
+            follow_simulator(reach.executor, reach.sim, relay)
     except Exception:
         # viewers keep asking: the next relay starts after a pause, not at every poll
         client.set(_key(run.id, "relay"), "failed", ex=RETRY_AFTER_FAILURE_S)

@@ -65,6 +65,22 @@ def free_port() -> int:
         return port
 
 
+def free_port_block(count: int = 3) -> int:
+    """Return the first of `count` consecutive TCP ports on 127.0.0.1 that are free right now."""
+    while True:
+        first = free_port()
+        probes = [socket.socket() for _ in range(count - 1)]
+        try:
+            for offset, probe in enumerate(probes, start=1):
+                probe.bind(("127.0.0.1", first + offset))
+            return first
+        except OSError:
+            continue
+        finally:
+            for probe in probes:
+                probe.close()
+
+
 def start_server(
     world: str,
     config: str,
@@ -72,8 +88,12 @@ def start_server(
     log_dir: Path | None = None,
     stderr: Path | None = None,
 ) -> tuple[subprocess.Popen[bytes], int]:
-    """Start `drcsim serve` on loopback ports; return the process and its command port."""
-    port, publish_port = free_port(), free_port()
+    """Start `drcsim serve` on loopback ports; return the process and its command port.
+
+    The topics ports are the defaults (command port + 1 and + 2), so `drcsim watch --port`
+    finds the loopback one.
+    """
+    port = free_port_block()
     args = [
         sys.executable,
         "-m",
@@ -87,8 +107,6 @@ def start_server(
         "127.0.0.1",
         "--port",
         str(port),
-        "--publish-port",
-        str(publish_port),
         *extra,
     ]
     if log_dir is not None:
@@ -100,11 +118,15 @@ def start_server(
 
 
 def wait_ready(
-    port: int, process: subprocess.Popen[bytes], timeout_s: float = 30.0, source: str | None = None
+    port: int,
+    process: subprocess.Popen[bytes],
+    timeout_s: float = 30.0,
+    source: str | None = None,
+    host: str = "127.0.0.1",
 ) -> None:
-    """Wait until the server at `port` answers hello (or its process dies)."""
+    """Wait until the server at host:port answers hello (or its process dies)."""
     deadline = time.monotonic() + timeout_s
-    with SimClient("127.0.0.1", port, timeout_s=0.5, source=source) as client:
+    with SimClient(host, port, timeout_s=0.5, source=source) as client:
         while time.monotonic() < deadline:
             if process.poll() is not None:
                 raise DrcsimError(f"server exited with {process.returncode}")

@@ -29,6 +29,7 @@ def _sensor_settings(pairs: list[str]) -> Any:
 
 def cmd_serve(args: argparse.Namespace) -> int:
     """Serve a world until its run ends or SIGTERM/SIGINT."""
+    from drcsim.client import LOCAL_PORT_OFFSET
     from drcsim.engine import RunOptions, Simulation
     from drcsim.server import ServerSettings, SimServer
 
@@ -42,6 +43,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         bind=args.bind,
         command_port=args.port,
         publish_port=args.publish_port or args.port + 1,
+        local_port=args.local_port or args.port + LOCAL_PORT_OFFSET,
         allow=args.allow or ["127.0.0.1/32"],
         lockstep=args.lockstep,
         linger_s=args.linger,
@@ -52,7 +54,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, lambda *_: server.stop())
     print(
         f"drcsim: serving {args.world} config {args.config} on tcp://{args.bind}:{args.port} "
-        f"(topics on {settings.publish_port}, lockstep={args.lockstep})",
+        f"(topics on {settings.publish_port}, ground truth on 127.0.0.1:{settings.local_port}, "
+        f"lockstep={args.lockstep})",
         flush=True,
     )
     try:
@@ -153,7 +156,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
     """Follow a running server's poses and score as JSON lines."""
     from drcsim.watch import watch
 
-    watch(args.server, args.port, args.rate, args.seconds)
+    watch(args.port, args.rate, args.seconds, local_port=args.local_port)
     return 0
 
 
@@ -184,6 +187,12 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--bind", default="127.0.0.1", help="address to listen on")
     serve.add_argument("--port", type=int, default=7700, help="command port")
     serve.add_argument("--publish-port", type=int, default=None, help="topics (default port+1)")
+    serve.add_argument(
+        "--local-port",
+        type=int,
+        default=None,
+        help="ground-truth topics, on 127.0.0.1 only (default port+2)",
+    )
     serve.add_argument("--allow", action="append", help="allowed client address or network")
     serve.add_argument("--lockstep", action="store_true", help="advance only on step commands")
     serve.add_argument("--log-dir", type=Path, default=None, help="where to write the run logs")
@@ -228,9 +237,11 @@ def build_parser() -> argparse.ArgumentParser:
     ladder.add_argument("--balance", default="harness", choices=["harness", "joints"])
     ladder.add_argument("--json", action="store_true")
     ladder.set_defaults(func=cmd_ladder)
-    follow = sub.add_parser("watch", help="print a running server's poses and score")
-    follow.add_argument("--server", required=True)
-    follow.add_argument("--port", type=int, default=7700)
+    follow = sub.add_parser(
+        "watch", help="print the poses and score of a server on this machine (loopback only)"
+    )
+    follow.add_argument("--port", type=int, default=7700, help="the server's command port")
+    follow.add_argument("--local-port", type=int, default=None, help="its loopback topics port")
     follow.add_argument("--rate", type=float, default=10.0, help="frames per simulated second")
     follow.add_argument("--seconds", type=float, default=60.0, help="wall seconds to follow")
     follow.set_defaults(func=cmd_watch)

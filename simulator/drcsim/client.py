@@ -13,7 +13,12 @@ import zmq
 from drcsim.commands import CommandAPI
 from drcsim.errors import ClientError
 
+# Field computers install drcsim without pybullet or numpy (see constellations' CLIENT_ONLY):
+# this module must import nothing heavier than zmq and msgpack.
 DEFAULT_COMMAND_PORT = 7700
+# Ground truth the viewer needs but team code must not see: published only on loopback.
+GROUND_TRUTH_TOPICS = ("poses",)
+LOCAL_PORT_OFFSET = 2  # the loopback topics port is the command port + this, by default
 
 
 class SimClient(CommandAPI):
@@ -79,6 +84,12 @@ class SimClient(CommandAPI):
     # -- topics -------------------------------------------------------------------------------
     def subscribe(self, *topics: str) -> None:
         """Start receiving `topics` (sensors are only computed while someone subscribes)."""
+        hidden = [t for t in topics if t in GROUND_TRUTH_TOPICS]
+        if hidden:
+            raise ClientError(
+                f"{', '.join(hidden)} is ground truth: the server publishes it only on the sim "
+                "machine's loopback (drcsim watch there), never to the LAN"
+            )
         if self.topics is None:
             if self.publish_port is None:
                 self.publish_port = int(self.hello()["publish_port"])

@@ -11,6 +11,7 @@ from typing import Any
 
 import zmq
 
+from drcsim.client import GROUND_TRUTH_TOPICS, LOCAL_PORT_OFFSET
 from drcsim.engine import Simulation
 from drcsim.errors import ProtocolError
 from drcsim.models.humanoid import ALL_JOINTS
@@ -21,8 +22,11 @@ from drcsim.sensors import SENSOR_TOPICS
 log = logging.getLogger("drcsim.server")
 ZAP_ENDPOINT = "inproc://zeromq.zap.01"
 ZAP_DOMAIN = b"drcsim"
-ON_DEMAND_TOPICS = (*SENSOR_TOPICS, "robot_state", "poses")
+LAN_ON_DEMAND_TOPICS = (*SENSOR_TOPICS, "robot_state")  # for team code, on the LAN
+ON_DEMAND_TOPICS = (*LAN_ON_DEMAND_TOPICS, *GROUND_TRUTH_TOPICS)
 ALWAYS_TOPICS = ("clock", "score")
+LOCAL_TOPICS = (*GROUND_TRUTH_TOPICS, *ALWAYS_TOPICS)  # what the loopback socket carries
+LOOPBACK = "127.0.0.1"
 MAX_LAG_STEPS = 200  # beyond this the wall clock is re-anchored: the run is slower than real time
 BATCH_STEPS = 5  # physics steps between looks at the sockets in real-time mode
 
@@ -34,6 +38,7 @@ class ServerSettings:
     bind: str = "127.0.0.1"
     command_port: int = 7700
     publish_port: int = 7701
+    local_port: int = 7700 + LOCAL_PORT_OFFSET  # ground truth, on the sim machine's loopback only
     allow: list[str] = field(default_factory=lambda: ["127.0.0.1/32"])
     lockstep: bool = False
     linger_s: float = 1.0  # keep answering this long after the run ends
@@ -45,6 +50,11 @@ def parse_networks(entries: list[str]) -> list[ipaddress.IPv4Network | ipaddress
         return [ipaddress.ip_network(entry, strict=False) for entry in entries]
     except ValueError as exc:
         raise ProtocolError(f"bad allow-list entry: {exc}") from exc
+
+
+def _wanted(prefixes: set[bytes], topics: tuple[str, ...]) -> set[str]:
+    """Return the topics some subscribed prefix matches."""
+    return {t for t in topics if any(t.encode().startswith(p) for p in prefixes)}
 
 
 def describe_run(sim: Simulation, lockstep: bool) -> dict[str, Any]:
@@ -69,7 +79,8 @@ def describe_run(sim: Simulation, lockstep: bool) -> dict[str, Any]:
         "time_limit_s": spec.time_limit_s,
         "joints": joints,
         "behaviours": sorted(BEHAVIOURS),
-        "topics": [*ALWAYS_TOPICS, *ON_DEMAND_TOPICS],
+        "topics": [*ALWAYS_TOPICS, *LAN_ON_DEMAND_TOPICS],
+        "local_topics": list(LOCAL_TOPICS),
         "checkpoints": [c["name"] for c in spec.checkpoints],
         "course": sim.briefing,
     }
@@ -93,7 +104,8 @@ class SimServer:
         self.networks = parse_networks(settings.allow)
         self.stats = ServerStats()
         self.running = True
-        self.subscriptions: set[bytes] = set()
+        self.subscriptions: set[bytes] = set()  # on the LAN-facing socket
+        self.local_subscriptions: set[bytes] = set()
         self.context = zmq.Context()
         # The ZAP handler must be bound before any socket accepts a connection.
         self.zap = self.context.socket(zmq.REP)
@@ -107,8 +119,15 @@ class SimServer:
         self.publisher.sndhwm = 200  # a slow subscriber loses old sensor frames, not the run
         self.router.bind(f"tcp://{settings.bind}:{settings.command_port}")
         self.publisher.bind(f"tcp://{settings.bind}:{settings.publish_port}")
+        # Ground truth (every body's pose) must not reach team code on the field computers:
+        # it goes out only here, on loopback, where just the sim machine's own processes (the
+        # viewer's relay) connect. No ZAP domain: the allow-list names the LAN, not loopback.
+        self.local = self.context.socket(zmq.XPUB)
+        self.local.linger = 0
+        self.local.sndhwm = 200
+        self.local.bind(f"tcp://{LOOPBACK}:{settings.local_port}")
         self.poller = zmq.Poller()
-        for sock in (self.zap, self.router, self.publisher):
+        for sock in (self.zap, self.router, self.publisher, self.local):
             self.poller.register(sock, zmq.POLLIN)
         sim.options.publish = self.publish
         self._rtf_mark = (time.monotonic(), sim.step_count)
@@ -119,7 +138,11 @@ class SimServer:
         """Send one message on a topic."""
         if topic == "clock":
             message["rtf"] = self.rtf
-        self.publisher.send_multipart([topic.encode(), encode(message)])
+        frames = [topic.encode(), encode(message)]
+        if topic not in GROUND_TRUTH_TOPICS:
+            self.publisher.send_multipart(frames)
+        if topic in LOCAL_TOPICS:
+            self.local.send_multipart(frames)
 
     def _update_rtf(self) -> None:
         now, step = time.monotonic(), self.sim.step_count
@@ -144,18 +167,28 @@ class SimServer:
         status = (b"200", b"OK") if allowed else (b"400", b"address not allowed")
         self.zap.send_multipart([version, request_id, *status, b"", b""])
 
-    def _handle_subscription(self) -> None:
-        frame = self.publisher.recv()
+    def _handle_subscription(self, sock: zmq.Socket) -> None:
+        frame = sock.recv()
         if not frame:
             return
-        topic = frame[1:]
+        topic, local = frame[1:], sock is self.local
+        subscriptions = self.local_subscriptions if local else self.subscriptions
         if frame[0] == 1:
-            self.subscriptions.add(topic)
+            subscriptions.add(topic)
+            if not local and topic and _wanted({topic}, GROUND_TRUTH_TOPICS):
+                # it gets nothing there; say why (an empty prefix is a plain "everything")
+                self.stats.rejected += 1
+                log.warning(
+                    "refused a subscription to %r on the LAN: ground truth (%s) is published "
+                    "only on the sim machine's loopback",
+                    topic.decode(errors="replace"),
+                    ", ".join(GROUND_TRUTH_TOPICS),
+                )
         else:
-            self.subscriptions.discard(topic)
-        self.sim.active_topics = {
-            t for t in ON_DEMAND_TOPICS if any(t.encode().startswith(p) for p in self.subscriptions)
-        }
+            subscriptions.discard(topic)
+        self.sim.active_topics = _wanted(self.subscriptions, LAN_ON_DEMAND_TOPICS) | _wanted(
+            self.local_subscriptions, GROUND_TRUTH_TOPICS
+        )
 
     def _handle_command(self) -> None:
         frames = self.router.recv_multipart(copy=False)
@@ -198,6 +231,7 @@ class SimServer:
         return {
             **describe_run(self.sim, self.settings.lockstep),
             "publish_port": self.settings.publish_port,
+            "local_port": self.settings.local_port,
         }
 
     def _drain(self, timeout_ms: int) -> None:
@@ -207,7 +241,7 @@ class SimServer:
             elif sock is self.router:
                 self._handle_command()
             else:
-                self._handle_subscription()
+                self._handle_subscription(sock)
 
     # -- main loop ----------------------------------------------------------------------------
     def run(self, should_stop: Callable[[], bool] = lambda: False) -> None:
@@ -243,6 +277,6 @@ class SimServer:
     def close(self) -> None:
         """Close the sockets and the simulation (which finalises its logs)."""
         self.sim.close()
-        for sock in (self.router, self.publisher, self.zap):
+        for sock in (self.router, self.publisher, self.local, self.zap):
             sock.close(linger=0)
         self.context.term()

@@ -39,6 +39,7 @@ def server(tmp_path: Path) -> Iterator[ServerFactory]:
         *extra: str,
         logs: bool = False,
         source: str = "127.0.0.1",
+        host: str = "127.0.0.1",
     ) -> tuple[subprocess.Popen[bytes], int]:
         log_dir = tmp_path / f"run-{len(processes)}" if logs else None
         process, port = start_server(
@@ -49,7 +50,7 @@ def server(tmp_path: Path) -> Iterator[ServerFactory]:
             stderr=tmp_path / f"server-{len(processes)}.log",
         )
         processes.append(process)
-        wait_ready(port, process, source=source)
+        wait_ready(port, process, source=source, host=host)
         return process, port
 
     yield factory

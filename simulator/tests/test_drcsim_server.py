@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -15,6 +17,17 @@ from drcsim.errors import ClientError
 from drcsim.protocol import MAX_MESSAGE_BYTES
 
 ServerFactory = Callable[..., tuple[Any, int]]
+
+
+def test_the_client_side_imports_without_the_physics_dependencies() -> None:
+    # field computers install drcsim with pyzmq and msgpack only (constellations' CLIENT_ONLY)
+    code = (
+        "import sys\n"
+        "sys.modules.update(pybullet=None, numpy=None)\n"
+        "import drcsim.client, drcsim.cli, drcsim.controllers\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
 
 
 def test_hello_describes_the_run_and_lockstep_holds_time(server: ServerFactory) -> None:

@@ -11,9 +11,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import msgpack
+import pytest
+import zmq
 from drcsim.cli import main
-from drcsim.client import SimClient
+from drcsim.client import LOCAL_PORT_OFFSET, SimClient
 from drcsim.engine import RunOptions, Simulation
+from drcsim.errors import ClientError
 from drcsim.viewer import StateLogPoses, describe_scene, link_poses
 from drcsim.watch import watch
 
@@ -69,35 +73,88 @@ def test_poses_rebuilt_from_the_state_log_match_the_simulation(tmp_path: Path) -
         assert max(abs(got[i] - expected[i]) for i in positions) < 1e-3  # 1 mm, every link
 
 
-def test_the_poses_topic_is_computed_only_while_subscribed(server: ServerFactory) -> None:
+def test_the_poses_topic_is_computed_only_while_subscribed_on_loopback(
+    server: ServerFactory,
+) -> None:
     _, port = server("vrc_task_2", "1")
-    with SimClient("127.0.0.1", port) as client:
-        client.hello()
-        client.subscribe("score")
+    with SimClient("127.0.0.1", port) as client, _LoopbackTopics(port) as local:
         client.step(100)
-        assert client.receive(timeout_s=0.3) is None or all(
-            topic != "poses" for topic, _ in _drain(client)
-        )
-        client.subscribe("poses")
+        assert all(topic != "poses" for topic, _ in local.drain())
+        local.subscribe("poses")
         time.sleep(0.2)  # the subscription travels to the server asynchronously
         client.step(100)  # 0.1 s: three frames at 30 Hz
-        frames = [message for topic, message in _drain(client) if topic == "poses"]
+        frames = [message for topic, message in local.drain() if topic == "poses"]
         assert len(frames) == 3
         robot_poses = next(iter(frames[-1]["poses"].values()))
         assert len(robot_poses) == 7 * 31 and abs(robot_poses[2] - 0.9) < 0.3
 
 
-def _drain(client: SimClient) -> list[tuple[str, dict[str, Any]]]:
-    received = []
-    while (item := client.receive(timeout_s=0.3)) is not None:
-        received.append(item)
-    return received
+def test_a_lan_client_never_gets_ground_truth_even_while_someone_watches(
+    server: ServerFactory, tmp_path: Path
+) -> None:
+    # the server listens on a "LAN" address and allows the whole network; team code
+    # connects from another address of it, as a field computer would
+    _, port = server(
+        "vrc_task_2", "1", "--bind", "127.0.0.2", "--allow", "127.0.0.0/8", host="127.0.0.2"
+    )
+    with (
+        SimClient("127.0.0.2", port, source="127.0.0.3") as team,
+        _LoopbackTopics(port) as local,
+        zmq.Context() as context,
+        context.socket(zmq.SUB) as sniffer,
+    ):
+        assert "poses" not in team.hello()["topics"]
+        with pytest.raises(ClientError, match="poses is ground truth"):
+            team.subscribe("poses")
+        team.subscribe("clock")
+        sniffer.connect(f"tcp://127.0.0.3:0;127.0.0.2:{port + 1}")
+        sniffer.setsockopt(zmq.SUBSCRIBE, b"")  # everything the LAN socket sends
+        sniffer.setsockopt(zmq.SUBSCRIBE, b"poses")  # and asking by name, past the client
+        local.subscribe("poses")
+        time.sleep(0.3)
+        team.step(100)
+        assert len([m for topic, m in local.drain() if topic == "poses"]) == 3
+        assert team.receive(timeout_s=1.0) is not None  # the LAN socket works...
+        seen = set()
+        while sniffer.poll(300):
+            seen.add(sniffer.recv_multipart()[0])
+        assert b"clock" in seen and b"poses" not in seen  # ...but never carries poses
+        team.stop()
+    log = (tmp_path / "server-0.log").read_text()
+    assert "refused a subscription to 'poses' on the LAN" in log
+
+
+class _LoopbackTopics:
+    """A subscriber on the server's loopback topics port, as `drcsim watch` connects."""
+
+    def __init__(self, port: int) -> None:
+        self.context = zmq.Context()
+        self.sock = self.context.socket(zmq.SUB)
+        self.sock.linger = 0
+        self.sock.connect(f"tcp://127.0.0.1:{port + LOCAL_PORT_OFFSET}")
+
+    def subscribe(self, topic: str) -> None:
+        self.sock.setsockopt(zmq.SUBSCRIBE, topic.encode())
+
+    def drain(self) -> list[tuple[str, dict[str, Any]]]:
+        received = []
+        while self.sock.poll(300):
+            topic, payload = self.sock.recv_multipart()
+            received.append((topic.decode(), msgpack.unpackb(payload, raw=False)))
+        return received
+
+    def __enter__(self) -> _LoopbackTopics:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.sock.close(linger=0)
+        self.context.term()
 
 
 def test_watch_prints_frames_at_its_rate_and_score_events(server: ServerFactory) -> None:
     _, port = server("vrc_task_2", "1")
     out = io.StringIO()
-    follower = threading.Thread(target=watch, args=("127.0.0.1", port, 10.0, 3.0, out))
+    follower = threading.Thread(target=watch, args=(port, 10.0, 3.0, out))
     follower.start()
     time.sleep(1.0)
     with SimClient("127.0.0.1", port) as client:

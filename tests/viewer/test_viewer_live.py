@@ -79,9 +79,7 @@ def test_an_officer_watches_a_running_simulator_live(
             ) as executor,
         ):
             sim = make_machine(sshd)
-            follow_simulator(
-                executor, sim, "127.0.0.1", relay, drcsim=DRCSIM, port=simulator, chunk_s=3
-            )
+            follow_simulator(executor, sim, relay, drcsim=DRCSIM, port=simulator, chunk_s=3)
 
     follower = threading.Thread(target=follow, daemon=True)
     page = webgl_browser.new_context().new_page()
