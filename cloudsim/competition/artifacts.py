@@ -24,8 +24,7 @@ from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.router_control import BANDWIDTH_LOG
 from cloudsim.models import Artifact, Run
-from provisioners.remote.ssh import Machine as Target
-from provisioners.remote.ssh import SSHError, SSHExecutor
+from provisioners.remote.ssh import SSHError, SSHExecutor, SSHTarget
 
 RUNS_DIR = "/var/lib/cloudsim/runs"
 CHUNK = 1 << 20
@@ -134,7 +133,7 @@ def file_sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-def remote_sha256(executor: SSHExecutor, target: Target, path: str) -> str | None:
+def remote_sha256(executor: SSHExecutor, target: SSHTarget, path: str) -> str | None:
     """Return the SHA-256 of a file on a machine, None when the file is not there."""
     quoted = shlex.quote(path)
     result = executor.run(target, f"if test -f {quoted}; then sha256sum {quoted}; fi", timeout=3600)
@@ -142,7 +141,7 @@ def remote_sha256(executor: SSHExecutor, target: Target, path: str) -> str | Non
     return text.split()[0] if text else None
 
 
-def snapshot_bandwidth_log(executor: SSHExecutor, router: Target, run_id: int) -> None:
+def snapshot_bandwidth_log(executor: SSHExecutor, router: SSHTarget, run_id: int) -> None:
     """Copy the router's bandwidth log beside the run's other logs, once (the router starts a
     new one at the next arm)."""
     folder = run_dir(run_id)
@@ -159,7 +158,7 @@ def snapshot_bandwidth_log(executor: SSHExecutor, router: Target, run_id: int) -
 def collect_logs(
     run: Run,
     executor: SSHExecutor,
-    reach: dict[str, Target],
+    reach: dict[str, SSHTarget],
     store: LogStore,
     staging: Path,
     log: Callable[[str], None],
@@ -209,7 +208,7 @@ def collect_logs(
     return problems
 
 
-def _fetch(executor: SSHExecutor, target: Target, path: str, local: Path, expected: str) -> int:
+def _fetch(executor: SSHExecutor, target: SSHTarget, path: str, local: Path, expected: str) -> int:
     """Download unless a staged copy with the expected checksum is there from a previous try."""
     if local.exists() and file_sha256(local) == expected:
         return local.stat().st_size

@@ -14,8 +14,7 @@ from drcsim.client import DEFAULT_COMMAND_PORT
 
 from cloudsim.models import Run, utcnow
 from constellations.plans.roles import RUN_STATE_DIR
-from provisioners.remote.ssh import Machine as Target
-from provisioners.remote.ssh import SSHExecutor
+from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 CURRENT_RUN = f"{RUN_STATE_DIR}/current-run.json"
 
@@ -39,7 +38,9 @@ def current_run_document(run: Run, sim_ip: str) -> dict[str, object]:
     }
 
 
-def announce(executor: SSHExecutor, field_computers: list[Target], run: Run, sim_ip: str) -> None:
+def announce(
+    executor: SSHExecutor, field_computers: list[SSHTarget], run: Run, sim_ip: str
+) -> None:
     """Write current-run.json on every field computer."""
     body = json.dumps(current_run_document(run, sim_ip), indent=2).encode() + b"\n"
     for target in field_computers:
@@ -47,7 +48,7 @@ def announce(executor: SSHExecutor, field_computers: list[Target], run: Run, sim
         executor.put_file(target, body, CURRENT_RUN, mode=0o644)
 
 
-def withdraw(executor: SSHExecutor, field_computers: list[Target]) -> None:
+def withdraw(executor: SSHExecutor, field_computers: list[SSHTarget]) -> None:
     """Remove current-run.json from every field computer: no run is on."""
     for target in field_computers:
         executor.run(target, f"rm -f {shlex.quote(CURRENT_RUN)}", timeout=30)

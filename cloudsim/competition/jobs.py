@@ -38,8 +38,7 @@ from cloudsim.launched_constellations import router_control
 from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair
 from cloudsim.models import Job, JobState, Run, RunState, ScoreEvent, utcnow
-from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor
-from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor, SSHTarget
 
 log = logging.getLogger(__name__)
 ROUTER_FAULT = "router fault (OCU traffic is held until it is fixed): "
@@ -62,18 +61,18 @@ class Machines:
     """SSH to a run's constellation: the executor and a target per role."""
 
     executor: SSHExecutor
-    sim: Target
-    router: Target | None
+    sim: SSHTarget
+    router: SSHTarget | None
     sim_ip: str
-    by_name: dict[str, Target]
+    by_name: dict[str, SSHTarget]
     fc_names: tuple[str, ...] = ()
 
     @property
-    def field_computers(self) -> list[Target]:
+    def field_computers(self) -> list[SSHTarget]:
         """Return the field computers (team code runs there)."""
         return [self.by_name[name] for name in self.fc_names if name in self.by_name]
 
-    def by_role(self) -> dict[str, Target]:
+    def by_role(self) -> dict[str, SSHTarget]:
         found = {"sim": self.sim}
         if self.router is not None:
             found["router"] = self.router

@@ -14,8 +14,7 @@ from cloudsim.launched_constellations.keys import KeyPair
 from cloudsim.models import Constellation, Machine
 from cloudsim.providers.service import Provider, open_provider
 from provisioners.providers.base import BEHIND_PUBLIC_MACHINE
-from provisioners.remote.ssh import HostKeys, Route
-from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import HostKeys, Route, SSHTarget
 
 
 def machine_host_keys(constellation: Constellation) -> HostKeys:
@@ -58,7 +57,7 @@ def record_routes(constellation: Constellation, provider: Provider, nodes: Itera
         row.ssh_route = route.to_json()
 
 
-def targets(constellation: Constellation, keys: KeyPair, config: Config) -> dict[str, Target]:
+def targets(constellation: Constellation, keys: KeyPair, config: Config) -> dict[str, SSHTarget]:
     """Return an SSH target per machine name, from the routes on the machines' rows."""
     if any(m.ssh_route is None for m in constellation.machines):
         # rows from before routes were recorded: ask the provider once
@@ -69,9 +68,9 @@ def targets(constellation: Constellation, keys: KeyPair, config: Config) -> dict
         m.name: Route.from_json(m.ssh_route) if m.ssh_route else Route(host=m.private_ip or "")
         for m in constellation.machines
     }
-    result: dict[str, Target] = {}
+    result: dict[str, SSHTarget] = {}
 
-    def target(name: str) -> Target:
+    def target(name: str) -> SSHTarget:
         if name not in result:
             route = routes[name]
             jump = target(route.jump) if route.jump else None

@@ -41,8 +41,7 @@ from constellations.plans import PLANS, Action, Need, PlanContext, PlanItem, fir
 from constellations.plans.roles import team_account
 from provisioners.providers.base import CloudSimNodeDriver
 from provisioners.remote.operations import apply
-from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor
-from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor, SSHTarget
 
 T = TypeVar("T")
 BOOTING = (NodeState.PENDING, NodeState.STARTING, NodeState.REBOOTING)
@@ -289,13 +288,13 @@ def _plan_context(
 def _deploy(
     ctx: JobContext,
     executor: SSHExecutor,
-    reach: dict[str, Target],
+    reach: dict[str, SSHTarget],
     plans: dict[str, list[PlanItem]],
 ) -> None:
     """Apply each machine's plan, all machines at once; fail naming every machine that failed."""
     ctx.checkpoint()  # the machines' threads write the log while this waits
 
-    def deploy(target: Target) -> int:
+    def deploy(target: SSHTarget) -> int:
         changed = 0
         for item in plans[target.name.rsplit("/", 1)[-1]]:
             if isinstance(item, Action):

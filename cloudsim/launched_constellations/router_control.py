@@ -16,8 +16,7 @@ from csrouter import protocol
 
 from cloudsim.errors import CloudSimError
 from constellations.plans.router import CSROUTER_COMMAND
-from provisioners.remote.ssh import Machine as Target
-from provisioners.remote.ssh import SSHError, SSHExecutor
+from provisioners.remote.ssh import SSHError, SSHExecutor, SSHTarget
 
 BANDWIDTH_LOG = protocol.BANDWIDTH_LOG
 CONTROL_TIMEOUT = 30
@@ -44,7 +43,7 @@ class Limits:
             raise ValueError("caps must not be negative")
 
 
-def _csrouter(executor: SSHExecutor, router: Target, *args: str) -> str:
+def _csrouter(executor: SSHExecutor, router: SSHTarget, *args: str) -> str:
     command = " ".join([CSROUTER_COMMAND, *map(shlex.quote, args)])
     try:
         return executor.run(router, command, timeout=CONTROL_TIMEOUT).stdout
@@ -52,13 +51,13 @@ def _csrouter(executor: SSHExecutor, router: Target, *args: str) -> str:
         raise RouterError(f"router: {' '.join(args[:1])} failed: {exc}") from exc
 
 
-def arm(executor: SSHExecutor, router: Target, limits: Limits, run_id: str) -> None:
+def arm(executor: SSHExecutor, router: SSHTarget, limits: Limits, run_id: str) -> None:
     """Set the run's latency and caps, zero the counters, start a new bandwidth log."""
     args = protocol.arm_args(limits.latency_ms, limits.uplink_bits, limits.downlink_bits, run_id)
     _csrouter(executor, router, *args)
 
 
-def counters(executor: SSHExecutor, router: Target) -> dict[str, Any]:
+def counters(executor: SSHExecutor, router: SSHTarget) -> dict[str, Any]:
     """Return the router's counters (csrouter.protocol describes them)."""
     output = _csrouter(executor, router, protocol.COUNTERS, "--json")
     try:
@@ -67,7 +66,7 @@ def counters(executor: SSHExecutor, router: Target) -> dict[str, Any]:
         raise RouterError(f"router: counters printed something else than JSON: {exc}") from exc
 
 
-def status(executor: SSHExecutor, router: Target) -> dict[str, Any]:
+def status(executor: SSHExecutor, router: SSHTarget) -> dict[str, Any]:
     """Return the daemon's status (with its faults, if any); RouterError when it is down."""
     command = f"{CSROUTER_COMMAND} {protocol.STATUS} --json"
     try:
@@ -84,6 +83,6 @@ def status(executor: SSHExecutor, router: Target) -> dict[str, Any]:
         raise RouterError(f"router: status printed something else than JSON: {exc}") from exc
 
 
-def disarm(executor: SSHExecutor, router: Target) -> None:
+def disarm(executor: SSHExecutor, router: SSHTarget) -> None:
     """End the run on the router: caps and counters stop (traffic stays delayed)."""
     _csrouter(executor, router, protocol.DISARM)

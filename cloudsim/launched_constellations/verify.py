@@ -14,8 +14,7 @@ from cloudsim.jobs.runner import JobContext
 from cloudsim.launched_constellations.vpn_check import PublicCommand, check_vpn
 from cloudsim.models import Constellation, utcnow
 from constellations.definition import PUBLIC, VPN, ConstellationKind, Reachability
-from provisioners.remote.ssh import Machine as Target
-from provisioners.remote.ssh import SSHExecutor
+from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 PROBE_SECONDS = 3
 # sensors on: the rendering path (camera, lidar) must work too, not only the physics
@@ -34,7 +33,7 @@ def verify_constellation(
     executor: SSHExecutor,
     constellation: Constellation,
     kind: ConstellationKind,
-    reach: dict[str, Target],
+    reach: dict[str, SSHTarget],
     public_probe: PublicProbe,
     public_command: PublicCommand,
 ) -> None:
@@ -113,7 +112,7 @@ def _describe(check: Reachability, connected: bool) -> str:
     return f"{check.source} -> {check.target}:{check.port} {seen}, expected the opposite"
 
 
-def _probe_from(executor: SSHExecutor, source: Target, address: str, port: int) -> bool:
+def _probe_from(executor: SSHExecutor, source: SSHTarget, address: str, port: int) -> bool:
     """Return True when a TCP connection from a machine reaches address:port.
 
     A refused connection reached it (nothing listens there now, e.g. the simulator's API
@@ -147,7 +146,7 @@ def _probe_public(public_probe: PublicProbe, address: str, port: int) -> bool:
     return result.returncode == 0
 
 
-def _selftest(executor: SSHExecutor, target: Target) -> dict[str, Any]:
+def _selftest(executor: SSHExecutor, target: SSHTarget) -> dict[str, Any]:
     result = executor.run(target, SELFTEST, check=False, timeout=300)
     lines = [line for line in result.stdout.splitlines() if line.startswith("{")]
     if not result.ok or not lines:

@@ -19,8 +19,7 @@ from constellations.definition import VPN, Reachability
 from constellations.plans.base import Action
 from constellations.plans.router import revocation
 from provisioners.remote.operations import apply
-from provisioners.remote.ssh import Machine as Target
-from provisioners.remote.ssh import SSHExecutor
+from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 # the provider's way to run argv on "the internet"; None: it has no such place
 PublicCommand = Callable[[list[str]], list[str] | None]
@@ -34,7 +33,7 @@ def check_vpn(
     executor: SSHExecutor,
     constellation: Constellation,
     rows: list[Reachability],
-    router: Target,
+    router: SSHTarget,
     public_command: PublicCommand,
     ctx: JobContext,
 ) -> list[dict[str, Any]]:
@@ -78,7 +77,7 @@ def _revoke_and_expect_cut(
     ctx: JobContext,
     executor: SSHExecutor,
     constellation: Constellation,
-    router: Target,
+    router: SSHTarget,
     issued: Any,
     name: str,
     there: There,

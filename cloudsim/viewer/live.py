@@ -27,8 +27,7 @@ from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Run, RunState, User
 from cloudsim.viewer.service import live_run_for
-from provisioners.remote.ssh import Machine as Target
-from provisioners.remote.ssh import SSHError, SSHExecutor
+from provisioners.remote.ssh import SSHError, SSHExecutor, SSHTarget
 
 log = logging.getLogger(__name__)
 BUFFER_SECONDS = 10  # of simulated time kept for viewers
@@ -173,7 +172,7 @@ class _Relay:
 
 def follow_simulator(
     executor: SSHExecutor,
-    sim: Target,
+    sim: SSHTarget,
     relay: _Relay,
     *,
     drcsim: str = DRCSIM,

@@ -9,8 +9,7 @@ from pathlib import Path
 
 from constellations.definition import ConstellationKind, MachineDefinition
 from provisioners.remote.operations import MachineTemplates, Operation
-from provisioners.remote.ssh import Machine as Target
-from provisioners.remote.ssh import SSHExecutor
+from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 
 @dataclass(frozen=True)
@@ -21,7 +20,7 @@ class Action:
     """
 
     name: str
-    run: Callable[[SSHExecutor, Target], bool]
+    run: Callable[[SSHExecutor, SSHTarget], bool]
 
 
 PlanItem = Operation | Action

@@ -9,8 +9,7 @@ from constellations.plans.software import (
     wait_for_port,
 )
 from provisioners.remote.operations import absent, directory, file, service, user
-from provisioners.remote.ssh import Machine as Target
-from provisioners.remote.ssh import SSHExecutor
+from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 SIMULATOR_VENV = "/opt/drcsim"
 CLIENT_ONLY = ("drcsim", "pyzmq", "msgpack")
@@ -97,7 +96,7 @@ def cloudsim_server(ctx: PlanContext) -> list[PlanItem]:
     ]
 
 
-def _no_password(executor: SSHExecutor, target: Target) -> bool:
+def _no_password(executor: SSHExecutor, target: SSHTarget) -> bool:
     """Give `team` no password rather than a locked one: sshd refuses a locked account's keys
     when it does not use PAM."""
     shadow = executor.run(target, f"getent shadow {TEAM_USER} | cut -d: -f2").stdout.strip()
@@ -107,7 +106,7 @@ def _no_password(executor: SSHExecutor, target: Target) -> bool:
     return True
 
 
-def _daemon_reload(executor: SSHExecutor, target: Target) -> bool:
+def _daemon_reload(executor: SSHExecutor, target: SSHTarget) -> bool:
     executor.run(target, "systemctl daemon-reload")
     return False
 

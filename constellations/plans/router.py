@@ -23,8 +23,7 @@ from provisioners.remote.operations import (
     service,
     sysctl,
 )
-from provisioners.remote.ssh import Machine as Target
-from provisioners.remote.ssh import SSHExecutor
+from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 FORWARD_CHAIN = "CLOUDSIM-FWD"
 OCU_CHAIN = "CLOUDSIM-OCU"  # raw and mangle: OCU<->LAN packets to csrouter's queues
@@ -219,10 +218,10 @@ def revocation(vpn: VpnMaterial) -> list[PlanItem]:
     ]
 
 
-def _disconnect(names: Sequence[str]) -> Callable[[SSHExecutor, Target], bool]:
+def _disconnect(names: Sequence[str]) -> Callable[[SSHExecutor, SSHTarget], bool]:
     """Return an action that ends the sessions of these certificate names, if connected."""
 
-    def run(executor: SSHExecutor, target: Target) -> bool:
+    def run(executor: SSHExecutor, target: SSHTarget) -> bool:
         if not names:
             return False
         command = shlex.join([VPN_DISCONNECT_COMMAND, *names])
@@ -235,7 +234,7 @@ def _disconnect(names: Sequence[str]) -> Callable[[SSHExecutor, Target], bool]:
 def _restart_on_change(name: str, steps: Sequence[PlanItem], unit: str) -> Action:
     """Apply steps in order; if any changed, reload systemd and restart the unit if it runs."""
 
-    def run(executor: SSHExecutor, target: Target) -> bool:
+    def run(executor: SSHExecutor, target: SSHTarget) -> bool:
         changed = False
         for step in steps:
             if isinstance(step, Action):

@@ -19,8 +19,7 @@ from urllib.parse import urlsplit
 from urllib.request import url2pathname
 
 from constellations.plans.base import Action
-from provisioners.remote.ssh import Machine as Target
-from provisioners.remote.ssh import SSHExecutor
+from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 SUMS = "SHA256SUMS"
 SOURCE_TARBALL = "cloudsim-source.tar.gz"
@@ -144,7 +143,7 @@ def _offline_install(
         if only is None or _distribution(name) in only
     }
 
-    def run(executor: SSHExecutor, target: Target) -> bool:
+    def run(executor: SSHExecutor, target: SSHTarget) -> bool:
         if executor.run(target, f"test -e {shlex.quote(marker)}", check=False).ok:
             return False
         executor.run(target, f"mkdir -p {shlex.quote(remote)}")
@@ -288,7 +287,7 @@ def wait_for_port(port: int, seconds: int = 120) -> Action:
     """Wait until something on the machine listens on a TCP port (a service finished starting)."""
     probe = f"until (exec 3<>/dev/tcp/127.0.0.1/{port}) 2>/dev/null; do sleep 0.5; done"
 
-    def run(executor: SSHExecutor, target: Target) -> bool:
+    def run(executor: SSHExecutor, target: SSHTarget) -> bool:
         executor.run(
             target, f"timeout {seconds} bash -c {shlex.quote(probe)}", timeout=seconds + 30
         )

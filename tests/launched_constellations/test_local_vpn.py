@@ -19,14 +19,13 @@ from cloudsim.launched_constellations.keys import generate_keypair
 from cloudsim.models import JobState, Role, User
 from cloudsim.people.service import create_team, update_user
 from cloudsim.providers.service import open_provider
-from provisioners.remote.ssh import HostKeys, SSHExecutor
-from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import HostKeys, SSHExecutor, SSHTarget
 from tests.conftest import make_user, token_for
 from tests.launched_constellations.conftest import finished
 from tests.support.servers import wait_for
 
 
-def _ocus(config: Config, names: list[str]) -> tuple[SSHExecutor, list[Target]]:
+def _ocus(config: Config, names: list[str]) -> tuple[SSHExecutor, list[SSHTarget]]:
     """Make operator stations on the public side (they are no machines of the constellation)."""
     driver = open_provider("local", config).driver
     network = driver.ex_create_network("ocu-home")
@@ -42,7 +41,7 @@ def _ocus(config: Config, names: list[str]) -> tuple[SSHExecutor, list[Target]]:
             image=driver.list_images()[0],
         )
         found.append(
-            Target(
+            SSHTarget(
                 name=name,
                 host=node.private_ips[0],
                 private_key=keys.private,
@@ -52,7 +51,7 @@ def _ocus(config: Config, names: list[str]) -> tuple[SSHExecutor, list[Target]]:
     return SSHExecutor(HostKeys()), found
 
 
-def connect(executor: SSHExecutor, ocu: Target, config: str, address: str) -> float:
+def connect(executor: SSHExecutor, ocu: SSHTarget, config: str, address: str) -> float:
     """Start a stock OpenVPN client with config on ocu; return its first RTT to address, ms."""
     executor.put_file(ocu, config.encode(), "/etc/openvpn/client/team.conf", mode=0o600)
     executor.run(ocu, "systemctl start openvpn-client@team")
@@ -65,7 +64,7 @@ def connect(executor: SSHExecutor, ocu: Target, config: str, address: str) -> fl
     return float(re.search(r"time=([\d.]+) ms", str(reply)).group(1))  # type: ignore[union-attr]
 
 
-def vpn_address(executor: SSHExecutor, ocu: Target) -> str:
+def vpn_address(executor: SSHExecutor, ocu: SSHTarget) -> str:
     """Return the address the VPN gave the OCU."""
     return executor.run(ocu, "ip -4 -o addr show dev tun0 | awk '{print $4}'").stdout.strip()
 

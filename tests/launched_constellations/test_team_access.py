@@ -24,8 +24,7 @@ from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair, generate_keypair
 from cloudsim.models import Constellation, Job, JobState, Role, Run, RunState
 from cloudsim.people.service import create_team, update_user
-from provisioners.remote.ssh import Machine as Target
-from provisioners.remote.ssh import SSHExecutor
+from provisioners.remote.ssh import SSHExecutor, SSHTarget
 from tests.competition.support import open_task
 from tests.competition.test_run_e2e import browser, live_url  # noqa: F401 (fixtures)
 from tests.conftest import make_user, token_for
@@ -176,7 +175,7 @@ def test_a_team_logs_in_deploys_its_code_and_scores_while_sim_stays_sealed(
         assert as_team("alice", "true")[0]
 
 
-def reaches(executor: SSHExecutor, ocu: Target, address: str, port: int) -> bool:
+def reaches(executor: SSHExecutor, ocu: SSHTarget, address: str, port: int) -> bool:
     """Return True when the OCU reaches address:port through the VPN (refused counts)."""
     probe = shlex.quote(f"exec 3<>/dev/tcp/{address}/{port}")
     result = executor.run(ocu, f"timeout 3 bash -c {probe}", check=False, timeout=30)
@@ -184,7 +183,9 @@ def reaches(executor: SSHExecutor, ocu: Target, address: str, port: int) -> bool
 
 
 @contextmanager
-def router_of(config: Config, constellation: Constellation) -> Iterator[tuple[SSHExecutor, Target]]:
+def router_of(
+    config: Config, constellation: Constellation
+) -> Iterator[tuple[SSHExecutor, SSHTarget]]:
     """Connect to the constellation's router as CloudSim does."""
     keys = constellation_keypair(constellation)
     reach = targets(constellation, keys, config)

@@ -30,8 +30,7 @@ from provisioners.providers.local.driver import LocalNodeDriver
 from provisioners.remote import pki
 from provisioners.remote.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule
 from provisioners.remote.operations import MachineTemplates, apply
-from provisioners.remote.ssh import CommandResult, ConnectPolicy, HostKeys, SSHExecutor
-from provisioners.remote.ssh import Machine as Target
+from provisioners.remote.ssh import CommandResult, ConnectPolicy, HostKeys, SSHExecutor, SSHTarget
 
 PREFIX = f"crt{os.getpid() % 100000}"
 SUBNET_POOL = "10.215.0.0/16"
@@ -60,7 +59,7 @@ class RouterLab:
 
     driver: LocalNodeDriver
     executor: SSHExecutor
-    targets: dict[str, Target]
+    targets: dict[str, SSHTarget]
     nodes: dict[str, Node]
     router_context: PlanContext
     sim_context: PlanContext
@@ -169,7 +168,7 @@ class RouterLab:
         self.run(host, f"python3 {REMOTE_TRAFFIC} send {to} {port} {count} {size} {pps}")
 
 
-def apply_plan(executor: SSHExecutor, target: Target, items: list[PlanItem]) -> int:
+def apply_plan(executor: SSHExecutor, target: SSHTarget, items: list[PlanItem]) -> int:
     """Apply plan items in order; return how many changed something."""
     changed = 0
     for item in items:
@@ -276,7 +275,7 @@ def _build_lab(driver: LocalNodeDriver, executor: SSHExecutor, scratch: Path) ->
         "ocu": driver.create_node(f"{PREFIX}-ocu", auth=auth, ex_network=home, ex_public=True),
     }
     targets = {
-        name: Target(
+        name: SSHTarget(
             name=name,
             host=str(node.private_ips[0]),
             private_key=private,

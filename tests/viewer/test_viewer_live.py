@@ -19,7 +19,7 @@ from playwright.sync_api import Browser, expect
 
 from cloudsim.models import RunState, User
 from cloudsim.viewer.live import _Relay, follow_simulator, redis_client
-from provisioners.remote.ssh import ConnectPolicy, HostKeys, Machine, SSHExecutor
+from provisioners.remote.ssh import ConnectPolicy, HostKeys, SSHExecutor, SSHTarget
 from tests.provisioners.remote.ssh.conftest import (  # noqa: F401
     client_key,
     make_machine,
@@ -62,7 +62,7 @@ def test_an_officer_watches_a_running_simulator_live(
     run_logs: Path,
     simulator: int,
     sshd: SshServer,  # noqa: F811
-    make_machine: Callable[..., Machine],  # noqa: F811
+    make_machine: Callable[..., SSHTarget],  # noqa: F811
 ) -> None:
     user_a, officer = people["user_a"], people["officer"]
     assert user_a is not None and user_a.team is not None and officer is not None

@@ -10,7 +10,7 @@ from provisioners.providers.servers.errors import InvalidRequestError
 from provisioners.providers.servers.inventory import Server
 from provisioners.remote.facts.iptables import iptables_prefix
 from provisioners.remote.operations.sysctl import DEFAULT_PERSIST_PATH
-from provisioners.remote.ssh import Machine, SSHExecutor
+from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 # What CloudSim's deploy plans put on a machine (constellations/plans: common, router, roles,
 # software); tests check these against the plans' own constants.
@@ -132,9 +132,9 @@ fi
 """
 
 
-def target(server: Server) -> Machine:
+def target(server: Server) -> SSHTarget:
     """Return how the controller logs in to a server with the inventory's credentials."""
-    return Machine(
+    return SSHTarget(
         name=server.name,
         host=server.address,
         port=server.port,

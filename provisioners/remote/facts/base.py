@@ -5,7 +5,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from typing import Generic, TypeVar
 
-from provisioners.remote.ssh import Machine, SSHError, SSHExecutor
+from provisioners.remote.ssh import SSHError, SSHExecutor, SSHTarget
 
 T = TypeVar("T")
 
@@ -36,7 +36,7 @@ class Fact(ABC, Generic[T]):
         return f"{type(self).__name__}({self.command!r})"
 
 
-def read_fact(executor: SSHExecutor, machine: Machine, fact: Fact[T], *, sudo: bool = False) -> T:
+def read_fact(executor: SSHExecutor, machine: SSHTarget, fact: Fact[T], *, sudo: bool = False) -> T:
     """Run a fact's command on a machine and parse what it printed."""
     result = executor.run(
         machine, fact.command, sudo=sudo, check=False, timeout=FACT_TIMEOUT_SECONDS

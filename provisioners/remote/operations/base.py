@@ -11,7 +11,7 @@ from pathlib import PurePosixPath
 from typing import Any
 
 from provisioners.remote.facts import Fact, read_fact
-from provisioners.remote.ssh import CommandFailed, Machine, SSHExecutor
+from provisioners.remote.ssh import CommandFailed, SSHExecutor, SSHTarget
 
 # commands of operations (package installs included) get this long by default
 COMMAND_TIMEOUT_SECONDS = 900.0
@@ -85,7 +85,7 @@ def chown_spec(owner: str | None, group: str | None) -> str:
 
 
 def plan_on(
-    executor: SSHExecutor, machine: Machine, operation: Operation, *, sudo: bool = False
+    executor: SSHExecutor, machine: SSHTarget, operation: Operation, *, sudo: bool = False
 ) -> list[Step]:
     """Read an operation's facts on a machine and return its steps without running them."""
     values = [read_fact(executor, machine, fact, sudo=sudo) for fact in operation.facts]
@@ -93,7 +93,7 @@ def plan_on(
 
 
 def apply(
-    executor: SSHExecutor, machine: Machine, operation: Operation, *, sudo: bool = False
+    executor: SSHExecutor, machine: SSHTarget, operation: Operation, *, sudo: bool = False
 ) -> OperationResult:
     """Bring a machine to an operation's desired state, changing only what differs."""
     steps = plan_on(executor, machine, operation, sudo=sudo)
@@ -109,7 +109,7 @@ def apply(
     return OperationResult(name=operation.name, changed=bool(steps), commands=executed)
 
 
-def _upload(executor: SSHExecutor, machine: Machine, upload: Upload, *, sudo: bool) -> list[str]:
+def _upload(executor: SSHExecutor, machine: SSHTarget, upload: Upload, *, sudo: bool) -> list[str]:
     destination = PurePosixPath(upload.destination)
     token = secrets.token_hex(6)
     # next to the destination the final mv is an atomic rename; a non-root login that

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from provisioners.remote.operations.base import Operation, OperationResult, apply
 from provisioners.remote.operations.errors import DeployFailed
-from provisioners.remote.ssh import Machine, SSHError, SSHExecutor
+from provisioners.remote.ssh import SSHError, SSHExecutor, SSHTarget
 
 
 @dataclass(frozen=True)
@@ -17,7 +17,7 @@ class Deploy:
     operations: Sequence[Operation]
 
     def apply(
-        self, executor: SSHExecutor, machine: Machine, *, sudo: bool = False
+        self, executor: SSHExecutor, machine: SSHTarget, *, sudo: bool = False
     ) -> list[OperationResult]:
         """Apply every operation in order; raise DeployFailed naming the one that failed."""
         results: list[OperationResult] = []

@@ -11,9 +11,9 @@ from provisioners.remote.ssh.errors import (
 )
 from provisioners.remote.ssh.executor import SSHExecutor
 from provisioners.remote.ssh.hostkeys import HostKeys, HostKeyStore, fingerprint
-from provisioners.remote.ssh.machine import Machine, Route, load_private_key
 from provisioners.remote.ssh.output import LogSink, SecretMasker
 from provisioners.remote.ssh.result import CommandResult, Transfer
+from provisioners.remote.ssh.target import Route, SSHTarget, load_private_key
 
 __all__ = [
     "CommandFailed",
@@ -26,10 +26,10 @@ __all__ = [
     "HostKeyStore",
     "HostKeys",
     "LogSink",
-    "Machine",
     "Route",
     "SSHError",
     "SSHExecutor",
+    "SSHTarget",
     "SecretMasker",
     "Transfer",
     "fingerprint",

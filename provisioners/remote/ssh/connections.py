@@ -13,8 +13,8 @@ import paramiko
 
 from provisioners.remote.ssh.errors import ConnectError
 from provisioners.remote.ssh.hostkeys import HostKeyStore, TrustOnFirstUse
-from provisioners.remote.ssh.machine import Machine, load_private_key
 from provisioners.remote.ssh.proxy import ArgvProxyCommand
+from provisioners.remote.ssh.target import SSHTarget, load_private_key
 
 # how long to wait for paramiko's reader thread to stop after a connection is closed
 _READER_STOP_SECONDS = 5.0
@@ -48,23 +48,23 @@ class ConnectionPool:
         self._host_keys = host_keys
         self._policy = policy
         self._log = log
-        self._connections: dict[str, tuple[Machine, fabric.Connection]] = {}
+        self._connections: dict[str, tuple[SSHTarget, fabric.Connection]] = {}
         self._keys: dict[str, paramiko.PKey] = {}
         self._locks: dict[str, threading.Lock] = {}
         self._sftp_locks: dict[str, threading.Lock] = {}
         self._pool_lock = threading.Lock()
 
-    def machine_lock(self, machine: Machine) -> threading.Lock:
+    def machine_lock(self, machine: SSHTarget) -> threading.Lock:
         """Return the lock that serialises connecting to one machine."""
         with self._pool_lock:
             return self._locks.setdefault(machine.name, threading.Lock())
 
-    def sftp_lock(self, machine: Machine) -> threading.Lock:
+    def sftp_lock(self, machine: SSHTarget) -> threading.Lock:
         """Return the lock that serialises transfers on one machine's SFTP session."""
         with self._pool_lock:
             return self._sftp_locks.setdefault(machine.name, threading.Lock())
 
-    def get(self, machine: Machine) -> fabric.Connection:
+    def get(self, machine: SSHTarget) -> fabric.Connection:
         """Return an open connection to the machine, connecting (with retries) if needed."""
         with self.machine_lock(machine):
             cached = self._connections.get(machine.name)
@@ -77,7 +77,7 @@ class ConnectionPool:
             self._connections[machine.name] = (machine, connection)
             return connection
 
-    def discard(self, machine: Machine) -> None:
+    def discard(self, machine: SSHTarget) -> None:
         """Close a machine's connection, e.g. after its transport broke."""
         with self.machine_lock(machine):
             self._drop(machine.name)
@@ -103,7 +103,7 @@ class ConnectionPool:
             if isinstance(transport.sock, ArgvProxyCommand):
                 transport.sock.release()
 
-    def _connect_with_retries(self, machine: Machine) -> fabric.Connection:
+    def _connect_with_retries(self, machine: SSHTarget) -> fabric.Connection:
         deadline = time.monotonic() + self._policy.deadline
         delay = self._policy.first_delay
         attempt = 0
@@ -127,7 +127,7 @@ class ConnectionPool:
                 self._log(machine.name, f"connected on attempt {attempt}")
             return connection
 
-    def _connect_once(self, machine: Machine) -> fabric.Connection:
+    def _connect_once(self, machine: SSHTarget) -> fabric.Connection:
         sock = self._open_path(machine)
         connection = fabric.Connection(
             machine.host,
@@ -171,7 +171,7 @@ class ConnectionPool:
                 transport.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         return connection
 
-    def _open_path(self, machine: Machine) -> ArgvProxyCommand | paramiko.Channel | None:
+    def _open_path(self, machine: SSHTarget) -> ArgvProxyCommand | paramiko.Channel | None:
         if machine.proxy_command is not None:
             return ArgvProxyCommand(machine.proxy_command)
         if machine.jump is not None:
@@ -186,7 +186,7 @@ class ConnectionPool:
             )
         return None
 
-    def _key(self, machine: Machine) -> paramiko.PKey:
+    def _key(self, machine: SSHTarget) -> paramiko.PKey:
         key = self._keys.get(machine.private_key)
         if key is None:
             key = load_private_key(machine.name, machine.private_key)
@@ -194,7 +194,7 @@ class ConnectionPool:
         return key
 
 
-def _jump_depth(machine: Machine) -> int:
+def _jump_depth(machine: SSHTarget) -> int:
     depth = 0
     while machine.jump is not None:
         machine, depth = machine.jump, depth + 1

@@ -20,9 +20,9 @@ import paramiko
 from provisioners.remote.ssh.connections import ConnectionPool, ConnectPolicy
 from provisioners.remote.ssh.errors import CommandFailed, CommandTimeout, GroupError, SSHError
 from provisioners.remote.ssh.hostkeys import HostKeyStore
-from provisioners.remote.ssh.machine import Machine
 from provisioners.remote.ssh.output import LineStream, LogSink, SecretMasker
 from provisioners.remote.ssh.result import CommandResult, Transfer
+from provisioners.remote.ssh.target import SSHTarget
 
 T = TypeVar("T")
 
@@ -69,7 +69,7 @@ class SSHExecutor:
 
     def run(
         self,
-        machine: Machine,
+        machine: SSHTarget,
         command: str,
         *,
         timeout: float | None = None,
@@ -104,7 +104,7 @@ class SSHExecutor:
         return result
 
     def put_file(
-        self, machine: Machine, source: Path | str | bytes, remote_path: str, mode: int = 0o644
+        self, machine: SSHTarget, source: Path | str | bytes, remote_path: str, mode: int = 0o644
     ) -> Transfer:
         """Upload a local file or bytes over SFTP; the remote file appears atomically."""
         remote = PurePosixPath(remote_path)
@@ -129,7 +129,7 @@ class SSHExecutor:
                 raise SSHError(f"{machine.name}: upload to {remote_path} failed: {exc}") from exc
         return Transfer(size=size, sha256=digest.hexdigest())
 
-    def get_file(self, machine: Machine, remote_path: str, local_path: Path | str) -> Transfer:
+    def get_file(self, machine: SSHTarget, remote_path: str, local_path: Path | str) -> Transfer:
         """Download a remote file over SFTP in chunks, replacing local_path when complete."""
         local = Path(local_path)
         partial = local.with_name(f".{local.name}.{token_source.token_hex(6)}.part")
@@ -158,8 +158,8 @@ class SSHExecutor:
 
     def run_parallel(
         self,
-        machines: Sequence[Machine],
-        task: Callable[[Machine], T],
+        machines: Sequence[SSHTarget],
+        task: Callable[[SSHTarget], T],
         *,
         raise_on_error: bool = True,
     ) -> dict[str, T | Exception]:
@@ -205,7 +205,7 @@ class SSHExecutor:
         """Send one line about a machine to the log sink, secrets masked."""
         self._sink(machine_name, self._mask(line))
 
-    def _open_session(self, machine: Machine) -> paramiko.Channel:
+    def _open_session(self, machine: SSHTarget) -> paramiko.Channel:
         try:
             return _session(self._pool.get(machine))
         except (OSError, EOFError, paramiko.SSHException) as exc:
@@ -216,7 +216,7 @@ class SSHExecutor:
 
     def _collect(
         self,
-        machine: Machine,
+        machine: SSHTarget,
         channel: paramiko.Channel,
         command: str,
         started: float,

@@ -9,8 +9,8 @@ from provisioners.remote.ssh import (
     ConnectError,
     ConnectPolicy,
     HostKeys,
-    Machine,
     SSHExecutor,
+    SSHTarget,
 )
 
 from .keys import KeyPair
@@ -48,8 +48,8 @@ class Shell:
         self._executor.close()
         self._refused.close()
 
-    def _machine(self, host: str, proxy: Sequence[str], key: KeyPair) -> Machine:
-        return Machine(
+    def _machine(self, host: str, proxy: Sequence[str], key: KeyPair) -> SSHTarget:
+        return SSHTarget(
             name=f"{host}/{key.blob[-12:]}",
             host=host,
             private_key=key.private,

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from cryptography.hazmat.primitives import serialization
 
-from provisioners.remote.ssh import ConnectPolicy, HostKeys, Machine, SSHExecutor
+from provisioners.remote.ssh import ConnectPolicy, HostKeys, SSHExecutor, SSHTarget
 
 from .sshd_server import PRIVSEP_DIR, KeyPair, LogRecorder, SshServer, free_port, make_key_pair
 
@@ -85,10 +85,10 @@ def executor(host_keys: HostKeys, log: LogRecorder) -> Iterator[SSHExecutor]:
 
 
 @pytest.fixture
-def make_machine(client_key: KeyPair) -> Callable[..., Machine]:
-    """Build Machine descriptions that log in as root with the test client key."""
+def make_machine(client_key: KeyPair) -> Callable[..., SSHTarget]:
+    """Build SSHTarget descriptions that log in as root with the test client key."""
 
-    def make(server: SshServer, name: str = "sim", **overrides: object) -> Machine:
+    def make(server: SshServer, name: str = "sim", **overrides: object) -> SSHTarget:
         fields: dict[str, object] = {
             "name": name,
             "host": "127.0.0.1",
@@ -97,6 +97,6 @@ def make_machine(client_key: KeyPair) -> Callable[..., Machine]:
             "private_key": client_key.private_pem,
         }
         fields.update(overrides)
-        return Machine(**fields)  # type: ignore[arg-type]
+        return SSHTarget(**fields)  # type: ignore[arg-type]
 
     return make

@@ -9,13 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from provisioners.remote.ssh import Machine, SSHError, SSHExecutor
+from provisioners.remote.ssh import SSHError, SSHExecutor, SSHTarget
 
 from .sshd_server import SshServer
 
 
 def test_put_bytes_then_get_them_back_with_matching_checksums(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine], tmp_path: Path
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget], tmp_path: Path
 ) -> None:
     machine = make_machine(sshd)
     payload = os.urandom(3 * 1024 * 1024 + 17)  # several SFTP chunks and an odd tail
@@ -38,7 +38,7 @@ def test_put_bytes_then_get_them_back_with_matching_checksums(
 
 
 def test_put_local_file_replaces_the_remote_file(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine], tmp_path: Path
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget], tmp_path: Path
 ) -> None:
     machine = make_machine(sshd)
     source = tmp_path / "source.conf"
@@ -51,7 +51,7 @@ def test_put_local_file_replaces_the_remote_file(
 
 
 def test_failed_transfers_raise_and_leave_no_partial_files(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine], tmp_path: Path
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget], tmp_path: Path
 ) -> None:
     machine = make_machine(sshd)
     with pytest.raises(SSHError, match=r"download of .*missing\.bin failed"):

@@ -23,7 +23,7 @@ from provisioners.remote.operations import (
     service,
     template,
 )
-from provisioners.remote.ssh import Machine, SSHExecutor
+from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 from .sshd_server import KeyPair, LogRecorder, SshServer
 
@@ -31,7 +31,7 @@ MOTD_CONTEXT = {"constellation": "vrc-7", "machine": "sim", "role": "simulator"}
 
 
 @pytest.fixture
-def machine(sshd: SshServer, make_machine: Callable[..., Machine]) -> Machine:
+def machine(sshd: SshServer, make_machine: Callable[..., SSHTarget]) -> SSHTarget:
     """Return the machine every test here provisions."""
     return make_machine(sshd, name="sim")
 
@@ -45,7 +45,7 @@ def target(tmp_path: Path) -> Path:
 
 
 def test_file_is_uploaded_once_then_left_alone(
-    executor: SSHExecutor, machine: Machine, target: Path, log: LogRecorder
+    executor: SSHExecutor, machine: SSHTarget, target: Path, log: LogRecorder
 ) -> None:
     path = target / "motd"
     operation = file(str(path), "welcome\n", mode=0o640)
@@ -67,7 +67,7 @@ def test_file_is_uploaded_once_then_left_alone(
 
 
 def test_changed_content_replaces_the_file_with_owner_applied(
-    executor: SSHExecutor, machine: Machine, target: Path
+    executor: SSHExecutor, machine: SSHTarget, target: Path
 ) -> None:
     path = target / "it's config.conf"
     path.write_text("old\n")
@@ -77,7 +77,7 @@ def test_changed_content_replaces_the_file_with_owner_applied(
 
 
 def test_template_is_rendered_and_uploaded_via_sudo_staging(
-    executor: SSHExecutor, machine: Machine, target: Path, log: LogRecorder
+    executor: SSHExecutor, machine: SSHTarget, target: Path, log: LogRecorder
 ) -> None:
     path = target / "motd"
     operation = template(str(path), "common/motd.j2", MOTD_CONTEXT)
@@ -93,7 +93,7 @@ def test_template_is_rendered_and_uploaded_via_sudo_staging(
 
 
 def test_directory_is_created_then_left_alone(
-    executor: SSHExecutor, machine: Machine, target: Path
+    executor: SSHExecutor, machine: SSHTarget, target: Path
 ) -> None:
     path = target / "srv" / "cloudsim"
     operation = directory(str(path), mode=0o750, owner="root")
@@ -105,14 +105,14 @@ def test_directory_is_created_then_left_alone(
     assert not apply(executor, machine, operation).changed
 
 
-def test_installed_package_is_a_no_op(executor: SSHExecutor, machine: Machine) -> None:
+def test_installed_package_is_a_no_op(executor: SSHExecutor, machine: SSHTarget) -> None:
     # hosts have no internet: packages come with the overlay root, so this must not run apt
     result = apply(executor, machine, deb_packages(["openssh-server", "socat"]))
     assert (result.changed, result.commands) == (False, [])
 
 
 def test_authorized_key_is_added_once(
-    executor: SSHExecutor, machine: Machine, target: Path, client_key: KeyPair
+    executor: SSHExecutor, machine: SSHTarget, target: Path, client_key: KeyPair
 ) -> None:
     keys = target / "ssh" / "authorized_keys"
     operation = authorized_key("root", client_key.public_line, path=str(keys))
@@ -123,7 +123,7 @@ def test_authorized_key_is_added_once(
 
 
 def test_service_plan_reads_facts_over_ssh_without_running_anything(
-    executor: SSHExecutor, machine: Machine
+    executor: SSHExecutor, machine: SSHTarget
 ) -> None:
     # the controller has no systemd: the plan falls back to init scripts
     assert plan_on(executor, machine, service("cloudsim-no-such-service")) == [
@@ -133,7 +133,7 @@ def test_service_plan_reads_facts_over_ssh_without_running_anything(
 
 
 def test_deploy_applies_in_order_and_is_idempotent(
-    executor: SSHExecutor, machine: Machine, target: Path
+    executor: SSHExecutor, machine: SSHTarget, target: Path
 ) -> None:
     etc = target / "etc"
     deploy = Deploy(
@@ -150,7 +150,7 @@ def test_deploy_applies_in_order_and_is_idempotent(
 
 
 def test_deploy_stops_at_the_first_failure_and_names_it(
-    executor: SSHExecutor, machine: Machine, target: Path
+    executor: SSHExecutor, machine: SSHTarget, target: Path
 ) -> None:
     blocker = target / "blocker"
     blocker.write_text("a file where a directory should be\n")
@@ -171,7 +171,7 @@ def test_deploy_stops_at_the_first_failure_and_names_it(
 
 
 def test_deploy_reports_a_failing_command(
-    executor: SSHExecutor, machine: Machine, target: Path
+    executor: SSHExecutor, machine: SSHTarget, target: Path
 ) -> None:
     deploy = Deploy([directory(str(target / "locked" / "inner"), owner="cloudsim-nobody")])
     with pytest.raises(DeployFailed, match=r"chown: invalid user: .cloudsim-nobody.") as failure:

@@ -12,8 +12,8 @@ from provisioners.remote.ssh import (
     ConnectPolicy,
     HostKeyMismatch,
     HostKeys,
-    Machine,
     SSHExecutor,
+    SSHTarget,
     fingerprint,
 )
 
@@ -22,7 +22,7 @@ from .sshd_server import LogRecorder, SshServer
 
 def test_host_key_is_recorded_at_first_contact_and_checked_afterwards(
     sshd_factory: Callable[..., SshServer],
-    make_machine: Callable[..., Machine],
+    make_machine: Callable[..., SSHTarget],
     host_keys: HostKeys,
     log: LogRecorder,
 ) -> None:
@@ -50,7 +50,7 @@ def test_host_key_is_recorded_at_first_contact_and_checked_afterwards(
 
 def test_host_keys_are_kept_per_machine_name(
     sshd_factory: Callable[..., SshServer],
-    make_machine: Callable[..., Machine],
+    make_machine: Callable[..., SSHTarget],
     host_keys: HostKeys,
 ) -> None:
     first, second = sshd_factory(), sshd_factory()
@@ -62,7 +62,7 @@ def test_host_keys_are_kept_per_machine_name(
 
 
 def test_proxy_command_carries_the_connection(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     # the address alone leads nowhere: only the proxy knows the way, as for a host in a netns
     machine = make_machine(
@@ -77,7 +77,7 @@ def test_proxy_command_carries_the_connection(
 
 
 def test_failing_proxy_command_is_retried_then_a_connect_error(
-    host_keys: HostKeys, sshd: SshServer, make_machine: Callable[..., Machine]
+    host_keys: HostKeys, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     machine = make_machine(sshd, name="unreachable", proxy_command=["false"])
     policy = ConnectPolicy(deadline=0.5, attempt_timeout=2.0, first_delay=0.1)
@@ -87,7 +87,7 @@ def test_failing_proxy_command_is_retried_then_a_connect_error(
 
 
 def test_missing_proxy_program_fails_at_once(
-    host_keys: HostKeys, sshd: SshServer, make_machine: Callable[..., Machine]
+    host_keys: HostKeys, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     machine = make_machine(sshd, name="nshost", proxy_command=["/nonexistent/cloudsim-proxy"])
     patient = ConnectPolicy(deadline=600.0)  # would take ten minutes if it were retried
@@ -102,7 +102,7 @@ def test_missing_proxy_program_fails_at_once(
 def test_jump_machine_forwards_to_a_private_machine(
     executor: SSHExecutor,
     sshd_factory: Callable[..., SshServer],
-    make_machine: Callable[..., Machine],
+    make_machine: Callable[..., SSHTarget],
     host_keys: HostKeys,
 ) -> None:
     router_server, sim_server = sshd_factory(), sshd_factory()
@@ -116,7 +116,7 @@ def test_jump_machine_forwards_to_a_private_machine(
     assert host_keys.get("router") == router_server.host_key_line
 
 
-def test_machine_rejects_contradictory_paths(make_machine: Callable[..., Machine]) -> None:
+def test_machine_rejects_contradictory_paths(make_machine: Callable[..., SSHTarget]) -> None:
     server = SshServer(workdir=Path("/nonexistent"), port=22, client_public_line="")
     router = make_machine(server, name="router")
     with pytest.raises(ValueError, match="not both"):

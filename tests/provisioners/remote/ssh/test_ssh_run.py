@@ -15,15 +15,15 @@ from provisioners.remote.ssh import (
     ConnectError,
     ConnectPolicy,
     HostKeys,
-    Machine,
     SSHExecutor,
+    SSHTarget,
 )
 
 from .sshd_server import LogRecorder, SshServer, free_port, wait_until
 
 
 def test_run_returns_stdout_stderr_and_exit_code(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     machine = make_machine(sshd)
     result = executor.run(machine, "echo out; echo err >&2; exit 3", check=False)
@@ -33,14 +33,14 @@ def test_run_returns_stdout_stderr_and_exit_code(
 
 
 def test_command_reading_stdin_gets_end_of_file(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     result = executor.run(make_machine(sshd), "cat; echo after-eof", timeout=20)
     assert result.stdout == "after-eof\n"
 
 
 def test_nonzero_exit_raises_command_failed_with_the_result(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     with pytest.raises(CommandFailed) as failure:
         executor.run(make_machine(sshd), "echo doomed >&2; exit 7")
@@ -50,7 +50,7 @@ def test_nonzero_exit_raises_command_failed_with_the_result(
 
 
 def test_command_failed_message_masks_secrets(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     with pytest.raises(CommandFailed) as failure:
         executor.run(make_machine(sshd), "echo token s3cret-token-value refused >&2; exit 1")
@@ -59,13 +59,13 @@ def test_command_failed_message_masks_secrets(
 
 
 def test_sudo_runs_the_command_as_root(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     assert executor.run(make_machine(sshd), "id -u", sudo=True).stdout == "0\n"
 
 
 def test_timeout_raises_and_kills_the_remote_process(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine], tmp_path: Path
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget], tmp_path: Path
 ) -> None:
     machine = make_machine(sshd)
     pid_file = tmp_path / "sleeper.pid"
@@ -86,7 +86,7 @@ def test_timeout_raises_and_kills_the_remote_process(
 
 
 def test_connection_is_reused_across_commands(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     machine = make_machine(sshd)
     ports = {executor.run(machine, "echo $SSH_CLIENT").stdout.split()[1] for _ in range(3)}
@@ -95,7 +95,7 @@ def test_connection_is_reused_across_commands(
 
 def test_connect_retries_until_the_server_listens(
     sshd_factory: Callable[..., SshServer],
-    make_machine: Callable[..., Machine],
+    make_machine: Callable[..., SSHTarget],
     host_keys: HostKeys,
     log: LogRecorder,
 ) -> None:
@@ -125,7 +125,7 @@ def test_connect_retries_until_the_server_listens(
 
 
 def test_connect_gives_up_at_the_deadline(
-    host_keys: HostKeys, client_key: object, make_machine: Callable[..., Machine]
+    host_keys: HostKeys, client_key: object, make_machine: Callable[..., SSHTarget]
 ) -> None:
     nowhere = SshServer(workdir=Path("/nonexistent"), port=free_port(), client_public_line="")
     machine = make_machine(nowhere, name="ghost")
@@ -136,7 +136,7 @@ def test_connect_gives_up_at_the_deadline(
 
 
 def test_wrong_client_key_is_a_connect_error(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     from cryptography.hazmat.primitives import serialization
 
@@ -155,7 +155,7 @@ def test_wrong_client_key_is_a_connect_error(
 def test_log_gets_commands_and_output_with_secrets_masked(
     executor: SSHExecutor,
     sshd: SshServer,
-    make_machine: Callable[..., Machine],
+    make_machine: Callable[..., SSHTarget],
     log: LogRecorder,
     client_key: object,
 ) -> None:
@@ -173,7 +173,7 @@ def test_log_gets_commands_and_output_with_secrets_masked(
 
 
 def test_run_parallel_returns_every_machine_result(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     machines = [make_machine(sshd, name="fc1"), make_machine(sshd, name="fc2")]
     results = executor.run_parallel(
@@ -183,13 +183,13 @@ def test_run_parallel_returns_every_machine_result(
 
 
 def test_run_parallel_group_error_carries_every_machine_outcome(
-    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., Machine]
+    executor: SSHExecutor, sshd: SshServer, make_machine: Callable[..., SSHTarget]
 ) -> None:
     from provisioners.remote.ssh import GroupError
 
     machines = [make_machine(sshd, name="good"), make_machine(sshd, name="bad")]
 
-    def task(machine: Machine) -> str:
+    def task(machine: SSHTarget) -> str:
         return executor.run(machine, "true" if machine.name == "good" else "exit 4").stdout
 
     with pytest.raises(GroupError) as group:

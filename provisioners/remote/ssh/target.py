@@ -16,7 +16,7 @@ from provisioners.remote.ssh.errors import ConnectError
 
 
 @dataclass(frozen=True, kw_only=True)
-class Machine:
+class SSHTarget:
     """An SSH target: address, login, key and how the controller's packets reach it."""
 
     name: str
@@ -28,7 +28,7 @@ class Machine:
     # `ip netns exec` or socat bridge into a host living in a network namespace.
     proxy_command: list[str] | None = None
     # a machine that forwards our connection (direct-tcpip), e.g. a router in front of a LAN.
-    jump: Machine | None = None
+    jump: SSHTarget | None = None
 
     def __post_init__(self) -> None:
         if self.proxy_command is not None and self.jump is not None:
@@ -80,9 +80,9 @@ class Route:
             jump=data.get("jump"),
         )
 
-    def target(self, name: str, private_key: str, jump: Machine | None = None) -> Machine:
+    def target(self, name: str, private_key: str, jump: SSHTarget | None = None) -> SSHTarget:
         """Return the SSH target this route leads to (jump: the target of `self.jump`)."""
-        return Machine(
+        return SSHTarget(
             name=name,
             host=self.host,
             user=self.user,
