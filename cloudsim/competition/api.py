@@ -4,15 +4,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from flask import current_app
 from flask.views import MethodView
 from marshmallow import Schema, fields, validate
 
 from cloudsim.api.common import Blueprint, SelectPage, caller
 from cloudsim.competition import runs as run_service
 from cloudsim.competition import schedule, season
-from cloudsim.competition.artifacts import LogStore
-from cloudsim.web.downloads import attachment
 from cloudsim.web.inputs import INT64_MAX, Id, Int
 
 blp = Blueprint("api_competition", __name__, description="Tasks, runs, logs and scores")
@@ -226,14 +223,7 @@ class RunLog(MethodView):
     @blp.response(200, content_type="application/octet-stream")
     def get(self, run_id: int, artifact_id: int) -> Any:
         """Download one of the run's logs (streamed; the X-Checksum-SHA256 header to verify)."""
-        artifact = run_service.get_log(caller(), run_id, artifact_id)
-        store = LogStore(current_app.config["CLOUDSIM"])
-        return attachment(
-            store.stream(artifact.location),
-            f"run-{run_id}-{artifact.filename}",
-            "application/octet-stream",
-            headers={"Content-Length": str(artifact.size), "X-Checksum-SHA256": artifact.sha256},
-        )
+        return run_service.log_download(caller(), run_id, artifact_id)
 
 
 @blp.route("/leaderboard")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 
-from flask import current_app
+from flask import Response, current_app
 from sqlalchemy import Select, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import selectinload
@@ -12,6 +12,7 @@ from sqlalchemy.orm import selectinload
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import Actor, require_team_access
 from cloudsim.competition import lifecycle
+from cloudsim.competition.artifacts import LogStore
 from cloudsim.competition.scoring import RunResult, Standing, rank
 from cloudsim.errors import Conflict, Forbidden, NotFound
 from cloudsim.extensions import db
@@ -26,6 +27,7 @@ from cloudsim.models import (
     Team,
     utcnow,
 )
+from cloudsim.web.downloads import attachment
 
 LIVE = (RunState.STARTING, RunState.RUNNING, RunState.STOPPING)
 RUNNABLE_KINDS = ("vrc", "simple")
@@ -132,6 +134,18 @@ def get_log(actor: Actor, run_id: int, artifact_id: int) -> Artifact:
     if artifact is None or artifact.run_id != run.id:
         raise NotFound.of(f"log {artifact_id} of run", run_id)
     return artifact
+
+
+def log_download(actor: Actor, run_id: int, artifact_id: int) -> Response:
+    """Return a stored log of a run the actor may see as a streamed download (page and API)."""
+    artifact = get_log(actor, run_id, artifact_id)
+    store = LogStore(current_app.config["CLOUDSIM"])
+    return attachment(
+        store.stream(artifact.location),
+        f"run-{run_id}-{artifact.filename}",
+        "application/octet-stream",
+        headers={"Content-Length": str(artifact.size), "X-Checksum-SHA256": artifact.sha256},
+    )
 
 
 def visible_runs(actor: Actor) -> Select[Run]:

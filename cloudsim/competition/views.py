@@ -204,14 +204,7 @@ def stop(run_id: int) -> ResponseReturnValue:
 @bp.route("/runs/<int:run_id>/logs/<int:artifact_id>")
 @login_required
 def download(run_id: int, artifact_id: int) -> ResponseReturnValue:
-    artifact = run_service.get_log(current_user, run_id, artifact_id)
-    store = LogStore(current_app.config["CLOUDSIM"])
-    return attachment(
-        store.stream(artifact.location),
-        f"run-{run_id}-{artifact.filename}",
-        "application/octet-stream",
-        headers={"Content-Length": str(artifact.size), "X-Checksum-SHA256": artifact.sha256},
-    )
+    return run_service.log_download(current_user, run_id, artifact_id)
 
 
 @bp.route("/leaderboard")
