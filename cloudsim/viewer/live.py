@@ -63,46 +63,42 @@ def redis_client() -> redis.Redis:
     return client
 
 
-def admit(actor: User, run: Run, viewer: str, config: Config) -> None:
-    """Count this viewer of the run; raise when it polls too fast or the run has enough viewers."""
-    client, now = redis_client(), time.time()
+def admit(client: redis.Redis, actor: User, run: Run, viewer: str, config: Config) -> str:
+    """Return the viewer's name in the count; raise when it polls too fast or is one too many."""
     member = f"{actor.id}:{viewer[:64]}"
-    try:
-        if not client.set(_key(run.id, f"poll:{member}"), 1, nx=True, px=config.viewer_poll_ms):
-            raise TooManyRequests(f"at most one request per {config.viewer_poll_ms} ms")
-        viewers = _key(run.id, "viewers")
-        pipe = client.pipeline()
-        pipe.zremrangebyscore(viewers, 0, now - VIEWER_TTL_S)
-        pipe.zscore(viewers, member)
-        pipe.zcard(viewers)
-        _, known, count = pipe.execute()
-        if known is None and count >= config.viewer_max_live:
-            raise Unavailable(
-                f"run {run.id} already has {count} live viewers (the most allowed); try later"
-            )
-        client.zadd(viewers, {member: now})
-        client.expire(viewers, VIEWER_TTL_S * 4)
-    except redis.RedisError as exc:
-        raise Unavailable(f"the live view needs Redis: {exc}") from exc
-
-
-def ensure_relay(actor: User, run: Run) -> None:
-    """Start the run's relay job unless one is alive (one per run, whoever asks)."""
-    client = redis_client()
-    if client.set(_key(run.id, "relay"), "starting", nx=True, ex=RELAY_LEASE_S * 3):
-        enqueue("viewer.relay", actor, RunJob(run.id), team_id=run.team_id)
-
-
-def live_frames(run: Run, after: float) -> tuple[list[str], list[dict[str, Any]], str]:
-    """Return the buffered frames newer than `after` (simulated seconds, as JSON texts), the
-    score events and the relay's state."""
-    client = redis_client()
+    viewers = _key(run.id, "viewers")
+    # one round trip: the throttle's mark and the viewer count (the prune is harmless if refused)
     pipe = client.pipeline()
+    pipe.set(_key(run.id, f"poll:{member}"), 1, nx=True, px=config.viewer_poll_ms)
+    pipe.zremrangebyscore(viewers, 0, time.time() - VIEWER_TTL_S)
+    pipe.zscore(viewers, member)
+    pipe.zcard(viewers)
+    fresh, _, known, count = pipe.execute()
+    if not fresh:
+        raise TooManyRequests(f"at most one request per {config.viewer_poll_ms} ms")
+    if known is None and count >= config.viewer_max_live:
+        raise Unavailable(
+            f"run {run.id} already has {count} live viewers (the most allowed); try later"
+        )
+    return member
+
+
+def live_frames(
+    client: redis.Redis, run: Run, member: str, after: float
+) -> tuple[list[str], list[dict[str, Any]], str, bool]:
+    """Count the admitted viewer and return the buffered frames newer than `after` (simulated
+    seconds, as JSON texts), the score events, the relay's state and whether it must start."""
+    viewers = _key(run.id, "viewers")
+    pipe = client.pipeline()
+    pipe.zadd(viewers, {member: time.time()})
+    pipe.expire(viewers, VIEWER_TTL_S * 4)
+    # one relay per run, whoever asks: the first poll without a live relay starts it
+    pipe.set(_key(run.id, "relay"), "starting", nx=True, ex=RELAY_LEASE_S * 3)
     pipe.zrangebyscore(_key(run.id, "frames"), f"({after}", "+inf")
     pipe.lrange(_key(run.id, "events"), 0, -1)
     pipe.get(_key(run.id, "relay"))
-    frames, events, relay = pipe.execute()
-    return frames, [json.loads(item) for item in events], relay or "stopped"
+    _, _, start, frames, events, relay = pipe.execute()
+    return frames, [json.loads(item) for item in events], relay or "stopped", bool(start)
 
 
 def store_frame(client: redis.Redis, run_id: int, frame: dict[str, Any], keep: int) -> None:
@@ -118,9 +114,14 @@ def store_frame(client: redis.Redis, run_id: int, frame: dict[str, Any], keep: i
 def live_answer(actor: User, run_id: int, after: float, viewer: str, config: Config) -> str:
     """Return (as JSON text) the live frames newer than `after` for one admitted viewer."""
     run = live_run_for(actor, run_id)
-    admit(actor, run, viewer, config)
-    ensure_relay(actor, run)
-    frames, events, relay = live_frames(run, after)
+    client = redis_client()
+    try:
+        member = admit(client, actor, run, viewer, config)
+        frames, events, relay, start = live_frames(client, run, member, after)
+    except redis.RedisError as exc:
+        raise Unavailable(f"the live view needs Redis: {exc}") from exc
+    if start:
+        enqueue("viewer.relay", actor, RunJob(run.id), team_id=run.team_id)
     head = json.dumps(
         {
             "events": events,
