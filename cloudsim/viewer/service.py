@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
+import shutil
 import threading
 from collections import OrderedDict
 from pathlib import Path
@@ -21,6 +23,7 @@ from cloudsim.models import Role, Run, RunState, User
 REPLAY_EVERY = 3  # every third 100 Hz state record: 33 frames per simulated second
 MAX_CHUNK_SECONDS = 30.0
 OPEN_REPLAYS = 4  # state logs kept open (a built world each) per web process
+CACHED_REPLAYS = 20  # runs whose logs stay copied in INSTANCE_DIR/viewer/
 REPLAY_LOGS = (rundir.META, rundir.STATE)
 LIVE_IS_FOR_OFFICERS = (
     "a live run is shown in 3D to officers only; your team can replay it when it has ended"
@@ -87,9 +90,12 @@ _replays = _Replays()
 
 def _local_logs(run: Run, config: Config) -> Path:
     """Return a local folder with the run's metadata and state log (copied once from the store)."""
-    folder = config.instance_dir / "viewer" / f"run-{run.id}"
+    cache = config.instance_dir / "viewer"
+    folder = cache / f"run-{run.id}"
     missing = [name for name in REPLAY_LOGS if not (folder / name).exists()]
     if not missing:
+        with contextlib.suppress(FileNotFoundError):
+            os.utime(folder)  # recently viewed: the last folder to prune
         return folder
     store = LogStore(config)
     folder.mkdir(parents=True, exist_ok=True)
@@ -102,7 +108,27 @@ def _local_logs(run: Run, config: Config) -> Path:
             for chunk in store.stream(artifact.location):
                 out.write(chunk)
         partial.replace(folder / name)
+    _prune(cache, keep=folder)
     return folder
+
+
+def _viewed_at(folder: Path) -> float:
+    try:
+        return folder.stat().st_mtime
+    except FileNotFoundError:  # pruned by another process meanwhile
+        return 0.0
+
+
+def _prune(cache: Path, keep: Path) -> None:
+    """Delete the least recently viewed runs' copies beyond CACHED_REPLAYS (at each new copy)."""
+    folders = sorted(
+        (f for f in cache.glob("run-*") if f != keep),
+        key=_viewed_at,
+        reverse=True,
+    )
+    for old in folders[CACHED_REPLAYS - 1 :]:
+        # a process still replaying it copies it again at its next request
+        shutil.rmtree(old, ignore_errors=True)
 
 
 def replay_frames(

@@ -17,6 +17,7 @@ from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext
 from cloudsim.models import Job, Role, RunState, User
 from cloudsim.people import service
+from cloudsim.viewer import service as viewer_service
 from cloudsim.viewer.live import _key, redis_client, relay_job, store_frame
 from tests.conftest import log_in, make_user, running_app, token_for
 from tests.viewer.conftest import store_run
@@ -136,3 +137,24 @@ def test_the_api_gives_a_script_the_scene_and_the_replay_frames(
         assert answer.status_code == 400, bad
     other = client.get(f"/api/v1/runs/{run.id}/view/scene", headers=token_for(people["user_b"]))
     assert other.status_code == 404
+
+
+def test_the_replay_cache_keeps_the_most_recently_viewed_runs_only(
+    app: Flask, people: dict[str, User | None], run_logs: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(viewer_service, "CACHED_REPLAYS", 2)
+    user_a = people["user_a"]
+    assert user_a is not None and user_a.team is not None
+    first, second, third = (store_run(user_a.team, run_logs) for _ in range(3))
+    client = _client(app, user_a)
+    cache = app.config["CLOUDSIM"].instance_dir / "viewer"
+
+    def replay(run_id: int) -> None:
+        answer = client.get(f"/runs/{run_id}/view/frames?start=0&seconds=0.1")
+        assert answer.status_code == 200 and answer.get_json()["frames"], answer.get_data()
+
+    for run in (first, second, third):
+        replay(run.id)
+    assert sorted(f.name for f in cache.iterdir()) == [f"run-{second.id}", f"run-{third.id}"]
+    replay(first.id)  # copied again when asked for
+    assert sorted(f.name for f in cache.iterdir()) == [f"run-{first.id}", f"run-{third.id}"]
