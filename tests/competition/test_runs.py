@@ -12,7 +12,16 @@ from flask import Flask
 from cloudsim.competition import runs
 from cloudsim.errors import Conflict, Forbidden
 from cloudsim.extensions import db
-from cloudsim.models import Constellation, ConstellationState, Job, RunState, Team, User, utcnow
+from cloudsim.models import (
+    Constellation,
+    ConstellationState,
+    Job,
+    Run,
+    RunState,
+    Team,
+    User,
+    utcnow,
+)
 from tests.competition.support import finished_run, open_task
 from tests.conftest import log_in, token_for
 
@@ -72,6 +81,25 @@ def test_the_api_refuses_starts_outside_the_window_or_by_another_team(
     unready = client.post(f"/api/v1/tasks/{task.id}/runs", json={}, headers=user_a)
     assert unready.status_code == 409 and "launching" in unready.json["message"]
     assert db.session.query(Job).filter_by(kind="run.start").count() == 0
+
+
+def test_a_team_starts_and_stops_a_run_through_the_api(
+    app: Flask, people: dict[str, User | None], team_a: Team, constellation: Constellation
+) -> None:
+    open_task(team_a.id)
+    client = app.test_client()
+    user_a = token_for(people["user_a"])  # type: ignore[arg-type]
+    [task] = client.get("/api/v1/tasks/open", headers=user_a).json
+    started = client.post(f"/api/v1/tasks/{task['id']}/runs", json={}, headers=user_a)
+    assert started.status_code == 202 and started.json["state"] == "starting", started.json
+    run_id = started.json["id"]
+    assert started.json["constellation_id"] == constellation.id
+    db.session.get(Run, run_id).state = RunState.RUNNING  # type: ignore[union-attr]
+    db.session.commit()
+    stopped = client.post(f"/api/v1/runs/{run_id}/stop", headers=user_a)
+    assert stopped.status_code == 202 and stopped.json["state"] == "stopping", stopped.json
+    shown = client.get(f"/api/v1/runs/{run_id}", headers=user_a).json
+    assert shown["stop_reason"] == "stopped" and shown["state"] == "stopping"
 
 
 def test_a_team_without_a_constellation_is_told_so(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from datetime import UTC, datetime, timedelta
 
 import pytest
@@ -11,7 +12,7 @@ from cloudsim.competition import schedule, season
 from cloudsim.errors import Forbidden, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Task, Team, User, utcnow
-from tests.conftest import token_for
+from tests.conftest import csrf_token, log_in, token_for
 
 SEASON = """\
 time_zone: America/Los_Angeles
@@ -199,3 +200,43 @@ def test_bad_season_documents_say_what_is_wrong(
     with pytest.raises((InvalidInput, NotFound), match=message):
         season.import_season(people["officer"], text)
     assert db.session.query(Task).count() == 0
+
+
+def test_an_officer_imports_a_season_and_deletes_a_task_through_the_pages(
+    app: Flask, people: dict[str, User | None], team_a: Team, team_b: Team
+) -> None:
+    client = app.test_client()
+    log_in(client, people["officer"])  # type: ignore[arg-type]
+    page = client.get("/tasks").get_data(as_text=True)
+    upload = (io.BytesIO(SEASON.encode()), "season.yaml")
+    imported = client.post(
+        "/tasks/import",
+        data={"csrf_token": csrf_token(page), "schedule_file": upload},
+        content_type="multipart/form-data",
+        follow_redirects=True,
+    )
+    assert "Imported the schedule: 5 new task(s)." in imported.get_data(as_text=True)
+    walking = db.session.query(Task).filter_by(name="Walking, run 2").one().id
+    page = client.get("/tasks").get_data(as_text=True)
+    assert f'action="/tasks/{walking}/delete"' in page
+    deleted = client.post(
+        f"/tasks/{walking}/delete", data={"csrf_token": csrf_token(page)}, follow_redirects=True
+    )
+    assert "Task deleted." in deleted.get_data(as_text=True)
+    db.session.expire_all()
+    assert db.session.get(Task, walking) is None and db.session.query(Task).count() == 4
+
+
+def test_an_officer_imports_a_season_and_deletes_a_task_through_the_api(
+    app: Flask, people: dict[str, User | None], team_a: Team, team_b: Team
+) -> None:
+    client = app.test_client()
+    officer = token_for(people["officer"])  # type: ignore[arg-type]
+    created = client.post("/api/v1/schedule", json={"yaml": SEASON}, headers=officer)
+    assert created.status_code == 201 and len(created.json) == 5, created.json
+    exported = client.get("/api/v1/schedule", headers=officer).json["yaml"]
+    assert "Walking, run 2" in exported
+    task_id = created.json[0]["id"]
+    assert client.delete(f"/api/v1/tasks/{task_id}", headers=officer).status_code == 204
+    assert client.get(f"/api/v1/tasks/{task_id}", headers=officer).status_code == 404
+    assert len(client.get("/api/v1/tasks", headers=officer).json) == 4
