@@ -71,6 +71,12 @@ class Walker:
         }
         self.trunk_slots = np.array([controller.slot[n] for n in TRUNK])
         self.links = {side: scene.robot_links[f"{side[0]}_foot"] for side in ("left", "right")}
+        self.link_indices = list(range(self.client.getNumJoints(scene.robot)))
+        # Masses of the base and every link (fixed, unlike localInertiaDiagonal below).
+        self.masses = [
+            self.client.getDynamicsInfo(scene.robot, link)[0]
+            for link in range(-1, len(self.link_indices))
+        ]
         self.use_gains()
         self.reset()
 
@@ -97,31 +103,23 @@ class Walker:
         x, y, z = state[4]
         return Foothold(x, y, z - ANKLE_TO_SOLE, yaw)
 
-    def _com_offset(self) -> np.ndarray:
+    def _com(self) -> np.ndarray:
+        """Return the whole robot's centre of mass in the world frame (from the links' poses)."""
         client, robot = self.client, self.scene.robot
+        places = [client.getBasePositionAndOrientation(robot)[0]]
+        places += [state[0] for state in client.getLinkStates(robot, self.link_indices)]
         total, moment = 0.0, np.zeros(3)
-        for link in range(-1, client.getNumJoints(robot)):
-            mass = client.getDynamicsInfo(robot, link)[0]
-            if link < 0:
-                where = client.getBasePositionAndOrientation(robot)[0]
-            else:
-                where = client.getLinkState(robot, link)[0]
+        for mass, where in zip(self.masses, places, strict=True):
             total, moment = total + mass, moment + mass * np.array(where)
-        pos, orn = client.getBasePositionAndOrientation(robot)
-        inverse = np.array(client.getMatrixFromQuaternion(orn)).reshape(3, 3).T
-        return inverse @ (moment / total - np.array(pos))
+        return moment / total
+
+    def _com_offset(self) -> np.ndarray:
+        pos, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
+        inverse = np.array(self.client.getMatrixFromQuaternion(orn)).reshape(3, 3).T
+        return inverse @ (self._com() - np.array(pos))
 
     def _whole_com(self) -> np.ndarray:
-        client, robot = self.client, self.scene.robot
-        total, moment = 0.0, np.zeros(2)
-        for link in range(-1, client.getNumJoints(robot)):
-            mass = self.masses[link + 1]
-            if link < 0:
-                where = client.getBasePositionAndOrientation(robot)[0]
-            else:
-                where = client.getLinkState(robot, link)[0]
-            total, moment = total + mass, moment + mass * np.array(where[:2])
-        return moment / total
+        return self._com()[:2]
 
     def reset(self) -> None:
         """Take the robot as it stands now: feet where they are, the COM above them."""
@@ -147,10 +145,6 @@ class Walker:
         self.velocity = np.zeros(2)
         self.tilt = 0.0
         self.active: Swing | None = None
-        self.masses = [
-            self.client.getDynamicsInfo(self.scene.robot, link)[0]
-            for link in range(-1, self.client.getNumJoints(self.scene.robot))
-        ]
         self.com_measured = self._whole_com()
 
     def _yaw(self) -> float:
@@ -265,20 +259,17 @@ class Walker:
         body = rotation(0.0, 0.0, yaw)
         pelvis = self._pelvis_target(body)
         # Balance from the IMU: tilt the legs against the pelvis's roll and pitch.
-        _, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
+        where, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
         roll, pitch, _ = self.client.getEulerFromQuaternion(orn)
         self.tilt = math.hypot(roll, pitch)
-        base = np.array(self.client.getBasePositionAndOrientation(self.scene.robot)[0])
         for side, foot in feet.items():
-            stance = swing is None or swing.side != side
-            if not stance:
+            if swing is not None and swing.side == side:
                 # The swing foot goes to its world target from where the pelvis really is.
+                base = np.array(where)
                 real = pelvis + SWING_FROM_ACTUAL * (base - pelvis) * np.array([1.0, 1.0, 0.0])
                 self._leg(side, foot, real, body, (0.0, 0.0), (roll, pitch))
-                continue
-            self._leg(
-                side, foot, pelvis, body, (roll, pitch) if stance else (0.0, 0.0), (roll, pitch)
-            )
+            else:
+                self._leg(side, foot, pelvis, body, (roll, pitch), (roll, pitch))
         self.controller.set_slot_positions(self.trunk_slots, np.zeros(len(TRUNK)))
 
     def _pelvis_target(self, body: np.ndarray) -> np.ndarray:
