@@ -72,6 +72,7 @@ class Behaviours:
         body = LEG_JOINTS + TRUNK_JOINTS
         self._body_slots = np.array([controller.slot[name] for name in body])
         self._stand_targets = np.array([humanoid.STAND_POSTURE.get(n, 0.0) for n in body])
+        self._sit_targets = np.array([humanoid.SIT_POSTURE.get(n, 0.0) for n in body])
         gait = [f"{side}_leg_{joint}" for side in "lr" for joint in ("hpy", "kny", "aky")]
         self._gait_index = np.array([body.index(name) for name in gait])
         controller.reset_to(humanoid.STAND_POSTURE)
@@ -228,9 +229,7 @@ class Behaviours:
             self.harness.hold(x, y, z, yaw)
             self._legs()
         elif self.mode == "seated":
-            self.controller.set_positions(
-                {n: humanoid.SIT_POSTURE.get(n, 0.0) for n in LEG_JOINTS + TRUNK_JOINTS}
-            )
+            self.controller.set_slot_positions(self._body_slots, self._sit_targets)
         for reach in self.reaches.values():
             if self.steps % REACH_EVERY == 0:
                 reach.update()
@@ -285,8 +284,6 @@ class Behaviours:
                 self._settle(pos)
                 return
             turn = math.copysign(min(TURN_RATE * dt, abs(yaw_error)), yaw_error)
-        if advance == 0.0 and distance <= POSITION_TOLERANCE / 2:
-            advance = 0.0
         yaw = _wrap(yaw + turn)
         direction = math.atan2(gy - y, gx - x) if distance > 1e-6 else yaw
         self.pose_cmd = [x + advance * math.cos(direction), y + advance * math.sin(direction), yaw]
