@@ -23,7 +23,6 @@ log = logging.getLogger("drcsim.server")
 ZAP_ENDPOINT = "inproc://zeromq.zap.01"
 ZAP_DOMAIN = b"drcsim"
 LAN_ON_DEMAND_TOPICS = (*SENSOR_TOPICS, "robot_state")  # for team code, on the LAN
-ON_DEMAND_TOPICS = (*LAN_ON_DEMAND_TOPICS, *GROUND_TRUTH_TOPICS)
 ALWAYS_TOPICS = ("clock", "score")
 LOCAL_TOPICS = (*GROUND_TRUTH_TOPICS, *ALWAYS_TOPICS)  # what the loopback socket carries
 LOOPBACK = "127.0.0.1"
