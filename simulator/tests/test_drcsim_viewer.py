@@ -81,10 +81,10 @@ def test_the_poses_topic_is_computed_only_while_subscribed_on_loopback(
         client.step(100)
         assert all(topic != "poses" for topic, _ in local.drain())
         local.subscribe("poses")
-        time.sleep(0.2)  # the subscription travels to the server asynchronously
+        start = _await_poses(client, local)
         client.step(100)  # 0.1 s: three frames at 30 Hz
         frames = [message for topic, message in local.drain() if topic == "poses"]
-        assert len(frames) == 3
+        assert [f["step"] for f in frames] == _pose_steps(start, 100)
         robot_poses = next(iter(frames[-1]["poses"].values()))
         assert len(robot_poses) == 7 * 31 and abs(robot_poses[2] - 0.9) < 0.3
 
@@ -111,9 +111,14 @@ def test_a_lan_client_never_gets_ground_truth_even_while_someone_watches(
         sniffer.setsockopt(zmq.SUBSCRIBE, b"")  # everything the LAN socket sends
         sniffer.setsockopt(zmq.SUBSCRIBE, b"poses")  # and asking by name, past the client
         local.subscribe("poses")
-        time.sleep(0.3)
+        for _ in range(100):  # until the sniffer's subscriptions have reached the server
+            if sniffer.poll(100):
+                break
+            team.step(10)
+        start = _await_poses(team, local)
         team.step(100)
-        assert len([m for topic, m in local.drain() if topic == "poses"]) == 3
+        frames = [m for topic, m in local.drain() if topic == "poses"]
+        assert [f["step"] for f in frames] == _pose_steps(start, 100)
         assert team.receive(timeout_s=1.0) is not None  # the LAN socket works...
         seen = set()
         while sniffer.poll(300):
@@ -122,6 +127,24 @@ def test_a_lan_client_never_gets_ground_truth_even_while_someone_watches(
         team.stop()
     log = (tmp_path / "server-0.log").read_text()
     assert "refused a subscription to 'poses' on the LAN" in log
+
+
+POSE_EVERY = round(1000 / 30)  # physics steps between `poses` frames at the default rate
+
+
+def _pose_steps(start: int, steps: int) -> list[int]:
+    """Return the steps after `start` (for `steps` more) that publish a `poses` frame."""
+    return [s for s in range(start + 1, start + steps + 1) if s % POSE_EVERY == 0]
+
+
+def _await_poses(client: SimClient, local: _LoopbackTopics) -> int:
+    """Step until a loopback `poses` subscription has reached the server; return the step."""
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:
+        step = int(client.step(POSE_EVERY)["step"])
+        if any(topic == "poses" for topic, _ in local.drain()):
+            return step
+    raise AssertionError("the poses subscription never reached the server")
 
 
 class _LoopbackTopics:
@@ -151,21 +174,37 @@ class _LoopbackTopics:
         self.context.term()
 
 
+class _Output(io.StringIO):
+    """What watch prints, with an event set at the first line."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.written = threading.Event()
+
+    def write(self, text: str) -> int:
+        self.written.set()
+        return super().write(text)
+
+
 def test_watch_prints_frames_at_its_rate_and_score_events(server: ServerFactory) -> None:
     _, port = server("vrc_task_2", "1")
-    out = io.StringIO()
-    follower = threading.Thread(target=watch, args=(port, 10.0, 3.0, out))
+    out = _Output()
+    follower = threading.Thread(target=watch, args=(port, 10.0, 5.0, out))
     follower.start()
-    time.sleep(1.0)
     with SimClient("127.0.0.1", port) as client:
-        for _ in range(10):
+        for _ in range(50):  # until watch has subscribed and printed a frame
+            if out.written.wait(0.2):
+                break
             client.step(100)
-            time.sleep(0.05)
+        start = client.state()["t"]
+        client.step(1000)
         client.stop()
     follower.join()
     lines = [json.loads(line) for line in out.getvalue().splitlines()]
     times = [line["frame"]["t"] for line in lines if "frame" in line]
-    assert 8 <= len(times) <= 11 and all(b - a >= 0.099 for a, b in itertools.pairwise(times))
+    assert all(b - a >= 0.099 for a, b in itertools.pairwise(times))
+    # frames every 33 steps, at most one per 0.1 s: one every 0.132 s of the 1 s stepped
+    assert 7 <= len([t for t in times if t > start]) <= 8
     assert any(line.get("score", {}).get("event") == "run_end" for line in lines)
 
 
