@@ -108,7 +108,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2))
     else:
         for row in result["rtf"]:
-            print(f"{row['world']:<11} sensors={row['sensors']!s:<5} rtf={row['rtf']}")
+            print(
+                f"{row['world']:<11} sensors={row['sensors']!s:<5} "
+                f"balance={row['balance']:<7} rtf={row['rtf']}"
+            )
         print(f"round trip: {result['round_trip']}")
     return 0
 
