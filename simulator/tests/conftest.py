@@ -40,12 +40,13 @@ def server(tmp_path: Path) -> Iterator[ServerFactory]:
         logs: bool = False,
         source: str = "127.0.0.1",
         host: str = "127.0.0.1",
+        lockstep: bool = True,
     ) -> tuple[subprocess.Popen[bytes], int]:
         log_dir = tmp_path / f"run-{len(processes)}" if logs else None
         process, port = start_server(
             world,
             config,
-            ["--lockstep", *extra],
+            ["--lockstep", *extra] if lockstep else list(extra),
             log_dir,
             stderr=tmp_path / f"server-{len(processes)}.log",
         )

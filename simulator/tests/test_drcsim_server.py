@@ -106,48 +106,33 @@ def test_sensors_are_published_only_to_subscribers(server: ServerFactory) -> Non
         assert "joint_states" not in seen and "contact" not in seen
 
 
-def test_real_time_mode_advances_on_its_own_and_refuses_step(tmp_path: Path) -> None:
-    from drcsim.bench import start_server, wait_ready
-
-    process, port = start_server("vrc_task_2", "1", [], stderr=tmp_path / "server.log")
-    try:
-        wait_ready(port, process)
-        with SimClient("127.0.0.1", port) as client:
-            client.subscribe("clock")
-            first = client.wait_for("clock")
-            later = client.wait_for("clock", lambda m: m["t"] >= first["t"] + 0.5)
-            assert later["step"] > first["step"]
-            reply = client.request({"op": "step", "steps": 1})
-            assert reply["ok"] is False and "lock-step" in reply["error"]
-            client.stop()
-        assert process.wait(timeout=30) == 0
-    finally:
-        if process.poll() is None:
-            process.terminate()
-            process.wait(timeout=30)
+def test_real_time_mode_advances_on_its_own_and_refuses_step(server: ServerFactory) -> None:
+    process, port = server("vrc_task_2", "1", lockstep=False)
+    with SimClient("127.0.0.1", port) as client:
+        client.subscribe("clock")
+        first = client.wait_for("clock")
+        later = client.wait_for("clock", lambda m: m["t"] >= first["t"] + 0.5)
+        assert later["step"] > first["step"]
+        reply = client.request({"op": "step", "steps": 1})
+        assert reply["ok"] is False and "lock-step" in reply["error"]
+        client.stop()
+    assert process.wait(timeout=30) == 0
 
 
-def test_a_real_time_run_stopped_by_sigterm_is_logged_and_replays(tmp_path: Path) -> None:
-    from drcsim.bench import start_server, wait_ready
+def test_a_real_time_run_stopped_by_sigterm_is_logged_and_replays(
+    server: ServerFactory, tmp_path: Path
+) -> None:
     from drcsim.replay import replay
 
-    process, port = start_server(
-        "vrc_task_2", "2", [], log_dir=tmp_path / "run", stderr=tmp_path / "server.log"
-    )
-    try:
-        wait_ready(port, process)
-        with SimClient("127.0.0.1", port) as client:
-            client.subscribe("clock")
-            client.behaviour("walk", pose=[2.0, 0.5, 0.0])
-            middle = client.wait_for("clock", lambda m: m["t"] >= 0.3)
-            client.joints(position={"l_arm_shx": -0.4})
-            client.wait_for("clock", lambda m: m["t"] >= middle["t"] + 0.5)
-        process.terminate()
-        assert process.wait(timeout=30) == 0
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.wait(timeout=30)
-    final = json.loads((tmp_path / "run" / "final.json").read_text())
+    process, port = server("vrc_task_2", "2", lockstep=False, logs=True)
+    with SimClient("127.0.0.1", port) as client:
+        client.subscribe("clock")
+        client.behaviour("walk", pose=[2.0, 0.5, 0.0])
+        middle = client.wait_for("clock", lambda m: m["t"] >= 0.3)
+        client.joints(position={"l_arm_shx": -0.4})
+        client.wait_for("clock", lambda m: m["t"] >= middle["t"] + 0.5)
+    process.terminate()
+    assert process.wait(timeout=30) == 0
+    final = json.loads((tmp_path / "run-0" / "final.json").read_text())
     assert final["end_reason"] == "closed" and final["step"] >= 800
-    assert replay(tmp_path / "run").final_digest == final["state_sha256"]
+    assert replay(tmp_path / "run-0").final_digest == final["state_sha256"]
