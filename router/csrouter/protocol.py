@@ -13,7 +13,6 @@ from csrouter.config import DEFAULT_BANDWIDTH_LOG, MAX_LATENCY_MS
 
 # Commands of the csrouter CLI that drive a run; the daemon's control socket takes the same ops.
 ARM, DISARM, COUNTERS, STATUS = "arm", "disarm", "counters", "status"
-CONTROL_COMMANDS = (ARM, DISARM, COUNTERS, STATUS)
 LOG_PATH = "log-path"
 
 # Exit codes: 0 done (status: healthy).
@@ -26,7 +25,6 @@ EXIT_UNHEALTHY = 4  # status: the daemon runs but reports faults (in its --json 
 # cap_bits, remaining_bits, spent, spent_at (UTC ISO 8601, null while not spent) and the
 # "accepted" and "dropped" totals (packets, ip_bytes, payload_bytes). Caps count TCP/UDP
 # payload bits.
-TOTALS = ("packets", "ip_bytes", "payload_bytes")
 
 BANDWIDTH_LOG = DEFAULT_BANDWIDTH_LOG
 __all__ = ["BANDWIDTH_LOG", "DIRECTIONS", "MAX_LATENCY_MS"]
