@@ -36,19 +36,28 @@ def check_chain_name(chain: str) -> str:
 
 
 @dataclass(frozen=True)
-class IptablesRuleFact(Fact[bool]):
-    """Whether a rule (its argv after the chain) is in a chain; asked with iptables -C."""
+class _ChainFact:
+    """A fact about one chain of one table, both names checked before anything runs."""
 
     table: str
     chain: str
+
+    def __post_init__(self) -> None:
+        check_table(self.table)
+        check_chain_name(self.chain)
+
+
+@dataclass(frozen=True)
+class IptablesRuleFact(_ChainFact, Fact[bool]):
+    """Whether a rule (its argv after the chain) is in a chain; asked with iptables -C."""
+
     rule: tuple[str, ...]
     ipv6: bool = False
     # -C exits 1 for "no such rule"
     ok_exit_codes = frozenset({0, 1})
 
     def __post_init__(self) -> None:
-        check_table(self.table)
-        check_chain_name(self.chain)
+        super().__post_init__()
         if not self.rule:
             raise ValueError("empty iptables rule")
 
@@ -64,16 +73,10 @@ class IptablesRuleFact(Fact[bool]):
 
 
 @dataclass(frozen=True)
-class IptablesChainFact(Fact[bool]):
+class IptablesChainFact(_ChainFact, Fact[bool]):
     """Whether a chain exists in a table."""
 
-    table: str
-    chain: str
     ipv6: bool = False
-
-    def __post_init__(self) -> None:
-        check_table(self.table)
-        check_chain_name(self.chain)
 
     @property
     def command(self) -> str:
@@ -87,18 +90,12 @@ class IptablesChainFact(Fact[bool]):
 
 
 @dataclass(frozen=True)
-class IptablesChainRulesFact(Fact["tuple[bool, ...] | None"]):
+class IptablesChainRulesFact(_ChainFact, Fact["tuple[bool, ...] | None"]):
     """Whether a chain holds exactly these rules: None without the chain, else for each rule
     whether it is in the chain, followed by False when the chain holds any other rule."""
 
-    table: str
-    chain: str
     rules: tuple[tuple[str, ...], ...]
     ipv6: bool = False
-
-    def __post_init__(self) -> None:
-        check_table(self.table)
-        check_chain_name(self.chain)
 
     @property
     def command(self) -> str:
