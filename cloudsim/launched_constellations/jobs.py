@@ -37,10 +37,17 @@ from cloudsim.launched_constellations.verify import verify_constellation
 from cloudsim.models import Constellation, ConstellationState, Secret
 from cloudsim.providers.service import Provider, open_provider
 from constellations.definition import ConstellationKind
-from constellations.plans import PLANS, Action, Need, PlanContext, PlanItem, firewall, needs_of
+from constellations.plans import (
+    PLANS,
+    Need,
+    PlanContext,
+    PlanItem,
+    apply_plan,
+    firewall,
+    needs_of,
+)
 from constellations.plans.roles import team_account
 from provisioners.providers.base import CloudSimNodeDriver
-from provisioners.remote.operations import apply
 from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor, SSHTarget
 
 T = TypeVar("T")
@@ -295,14 +302,7 @@ def _deploy(
     ctx.checkpoint()  # the machines' threads write the log while this waits
 
     def deploy(target: SSHTarget) -> int:
-        changed = 0
-        for item in plans[target.name.rsplit("/", 1)[-1]]:
-            if isinstance(item, Action):
-                executor.log(target.name, f"[{item.name}]")
-                changed += item.run(executor, target)
-            else:
-                changed += apply(executor, target, item).changed
-        return changed
+        return apply_plan(executor, target, plans[target.name.rsplit("/", 1)[-1]])
 
     try:
         outcome = executor.run_parallel(list(reach.values()), deploy)

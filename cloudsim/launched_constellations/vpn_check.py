@@ -16,9 +16,8 @@ from cloudsim.jobs.runner import JobContext
 from cloudsim.launched_constellations import vpn
 from cloudsim.models import Constellation
 from constellations.definition import VPN, Reachability
-from constellations.plans.base import Action
+from constellations.plans.base import apply_plan
 from constellations.plans.router import revocation
-from provisioners.remote.operations import apply
 from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 # the provider's way to run argv on "the internet"; None: it has no such place
@@ -87,11 +86,7 @@ def _revoke_and_expect_cut(
     """Revoke the check's certificate on the router; it must lose the LAN within seconds."""
     vpn.revoke_certificate(constellation, issued.serial, name)
     ctx.checkpoint()  # the list goes to the router now: record it now (and let go of SQLite)
-    for item in revocation(vpn.server_material(constellation)):
-        if isinstance(item, Action):
-            item.run(executor, router)
-        else:
-            apply(executor, router, item)
+    apply_plan(executor, router, revocation(vpn.server_material(constellation)))
     open_row = next((r for r in rows if r.allowed), rows[0])
     deadline = time.monotonic() + CUT_SECONDS
     cut = False

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 
-from constellations.plans.base import Action, Need, PlanContext, PlanItem
+from constellations.plans.base import Action, Need, PlanContext, PlanItem, apply_plan
 from constellations.plans.common import common, firewall
 from constellations.plans.roles import cloudsim_server, field_computer, simulator
 from constellations.plans.router import router
@@ -46,6 +46,7 @@ __all__ = [
     "Plan",
     "PlanContext",
     "PlanItem",
+    "apply_plan",
     "firewall",
     "needs_of",
 ]

@@ -8,7 +8,7 @@ from enum import StrEnum
 from pathlib import Path
 
 from constellations.definition import ConstellationKind, MachineDefinition
-from provisioners.remote.operations import MachineTemplates, Operation
+from provisioners.remote.operations import MachineTemplates, Operation, apply
 from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 
@@ -24,6 +24,18 @@ class Action:
 
 
 PlanItem = Operation | Action
+
+
+def apply_plan(executor: SSHExecutor, target: SSHTarget, items: list[PlanItem]) -> int:
+    """Apply plan items to a machine in order; return how many changed it."""
+    changed = 0
+    for item in items:
+        if isinstance(item, Action):
+            executor.log(target.name, f"[{item.name}]")  # operations log their own verdict
+            changed += item.run(executor, target)
+        else:
+            changed += apply(executor, target, item).changed
+    return changed
 
 
 class Need(StrEnum):
