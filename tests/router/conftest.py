@@ -17,19 +17,18 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import pytest
-from cryptography.hazmat.primitives import serialization
-from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from libcloud.compute.base import Node, NodeAuthSSHKey
 
+from cloudsim.launched_constellations.keys import generate_keypair
 from constellations.definition import ConstellationKind, load_kind
-from constellations.plans import PLANS, PlanContext, PlanItem, firewall
-from constellations.plans.base import Action, VpnMaterial
+from constellations.plans import PLANS, PlanContext, apply_plan, firewall
+from constellations.plans.base import VpnMaterial
 from constellations.plans.router import VPN_SERVER_NAME, router
 from constellations.plans.software import build_wheelhouse, distribution_source
 from provisioners.providers.local.driver import LocalNodeDriver
 from provisioners.remote import pki
 from provisioners.remote.firewall import SOURCE_ANY, SOURCE_LAN, FirewallRule
-from provisioners.remote.operations import MachineTemplates, apply
+from provisioners.remote.operations import MachineTemplates
 from provisioners.remote.ssh import CommandResult, ConnectPolicy, HostKeys, SSHExecutor, SSHTarget
 
 PREFIX = f"crt{os.getpid() % 100000}"
@@ -168,30 +167,6 @@ class RouterLab:
         self.run(host, f"python3 {REMOTE_TRAFFIC} send {to} {port} {count} {size} {pps}")
 
 
-def apply_plan(executor: SSHExecutor, target: SSHTarget, items: list[PlanItem]) -> int:
-    """Apply plan items in order; return how many changed something."""
-    changed = 0
-    for item in items:
-        if isinstance(item, Action):
-            changed += item.run(executor, target)
-        else:
-            changed += apply(executor, target, item).changed
-    return changed
-
-
-def _ssh_key() -> tuple[str, str]:
-    key = Ed25519PrivateKey.generate()
-    private = key.private_bytes(
-        serialization.Encoding.PEM,
-        serialization.PrivateFormat.OpenSSH,
-        serialization.NoEncryption(),
-    ).decode()
-    public = key.public_key().public_bytes(
-        serialization.Encoding.OpenSSH, serialization.PublicFormat.OpenSSH
-    )
-    return private, f"{public.decode()} cloudsim-router-tests"
-
-
 @pytest.fixture(scope="session")
 def lab() -> Iterator[RouterLab]:
     """Boot router, sim and OCU, apply the plans, connect the OCU; destroy it all after."""
@@ -257,8 +232,8 @@ def _build_lab(driver: LocalNodeDriver, executor: SSHExecutor, scratch: Path) ->
     driver.ex_destroy_network(lan)
     lan = driver.ex_create_network(f"{PREFIX}-lan", lan.cidr, router_ip)
     home = driver.ex_create_network(f"{PREFIX}-home")
-    private, public = _ssh_key()
-    auth = NodeAuthSSHKey(public)
+    keys = generate_keypair("cloudsim-router-tests")
+    auth = NodeAuthSSHKey(keys.public)
     wheelhouse = build_wheelhouse(
         distribution_source("cloudsim-router"), scratch / "wheelhouse", sys.executable
     )
@@ -278,7 +253,7 @@ def _build_lab(driver: LocalNodeDriver, executor: SSHExecutor, scratch: Path) ->
         name: SSHTarget(
             name=name,
             host=str(node.private_ips[0]),
-            private_key=private,
+            private_key=keys.private,
             proxy_command=node.extra["ssh_proxy_command"],
         )
         for name, node in nodes.items()
