@@ -8,6 +8,7 @@ from sqlalchemy import select
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.extensions import db
+from cloudsim.launched_constellations import lifecycle
 from cloudsim.models import Constellation, ConstellationState, Role, SshKey, User
 from constellations.plans.roles import TEAM_USER
 from provisioners.remote.operations import MachineTemplates
@@ -30,8 +31,6 @@ def team_keys(team_id: int | None) -> tuple[str, ...]:
 
 def refresh_team_access(team_ids: Iterable[int | None], also: Iterable[Constellation] = ()) -> None:
     """Push the current keys and VPN revocations to the teams' constellations (and `also`)."""
-    from cloudsim.launched_constellations import lifecycle
-
     wanted = {c.id: c for c in also}
     teams = {t for t in team_ids if t is not None}
     if teams:

@@ -14,7 +14,7 @@ from cloudsim.audit.service import record
 from cloudsim.auth.policy import SYSTEM, require_team_access
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.launched_constellations.access import field_computers, ssh_config
+from cloudsim.launched_constellations.access import field_computers, refresh_team_access, ssh_config
 from cloudsim.launched_constellations.keys import constellation_secret
 from cloudsim.models import Constellation, ConstellationState, Role, Secret, SecretKind, User
 from constellations.plans.base import VpnMaterial
@@ -258,7 +258,5 @@ def revoke_and_push(user: User, team_ids: Iterable[int | None] = ()) -> None:
     The one hook for a user leaving (disabled, moved, deleted) or coming back: `team_ids` are
     the teams whose field computers' keys change (the old team and the new one).
     """
-    from cloudsim.launched_constellations.access import refresh_team_access
-
     revoked = revoke_user(user, everywhere=False)
     refresh_team_access([*team_ids, user.team_id], also=revoked)
