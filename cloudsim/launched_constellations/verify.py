@@ -11,7 +11,7 @@ from typing import Any
 
 from cloudsim.errors import CloudSimError
 from cloudsim.jobs.runner import JobContext
-from cloudsim.launched_constellations.vpn_check import PublicCommand, check_vpn
+from cloudsim.launched_constellations.vpn_check import PublicCommand, check_result, check_vpn
 from cloudsim.models import Constellation, utcnow
 from constellations.definition import PUBLIC, VPN, ConstellationKind, Reachability
 from provisioners.remote.ssh import SSHExecutor, SSHTarget
@@ -55,26 +55,16 @@ def verify_constellation(
     private = {m.name: m.private_ip or "" for m in constellation.machines}
     for check in kind.reachability:
         if check.source == VPN:
-            continue  # checked through a VPN client of its own (not yet: see the README)
+            continue  # checked below, through a VPN client of its own
         if check.source == PUBLIC:
             connected = _probe_public(public_probe, addresses[check.target], check.port)
         else:
             connected = _probe_from(
                 executor, reach[check.source], private[check.target], check.port
             )
-        verdict = connected == check.allowed
         owner = check.target if check.source == PUBLIC else check.source
-        results[owner]["checks"].append(
-            {
-                "from": check.source,
-                "to": check.target,
-                "port": check.port,
-                "expected": "open" if check.allowed else "closed",
-                "seen": "open" if connected else "closed",
-                "ok": verdict,
-            }
-        )
-        if not verdict:
+        results[owner]["checks"].append(check_result(check, connected))
+        if connected != check.allowed:
             failures.append(_describe(check, connected))
     routers = [m.name for m in kind.machines if "router" in m.plan]
     if routers:
