@@ -6,26 +6,12 @@ from typing import Any
 
 from flask import Response, current_app
 from flask.views import MethodView
-from marshmallow import Schema, fields, validate
 
 from cloudsim.api.common import Blueprint, caller
 from cloudsim.viewer import live, service
+from cloudsim.viewer.schemas import FramesQuery, LiveQuery
 
 blp = Blueprint("api_viewer", __name__, description="A run in 3D: scene, replay and live frames")
-
-
-class FramesQuery(Schema):
-    start = fields.Float(load_default=0.0, validate=validate.Range(min=0), allow_nan=False)
-    seconds = fields.Float(
-        load_default=5.0,
-        validate=validate.Range(min=0, max=service.MAX_CHUNK_SECONDS, min_inclusive=False),
-        allow_nan=False,
-    )
-
-
-class LiveQuery(Schema):
-    after = fields.Float(load_default=-1.0, allow_nan=False)
-    viewer = fields.Str(load_default="", validate=validate.Length(max=64))
 
 
 @blp.route("/runs/<int:run_id>/view/scene")

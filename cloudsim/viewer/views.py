@@ -2,31 +2,19 @@
 
 from __future__ import annotations
 
-import math
+from typing import Any
 
-from flask import Blueprint, Response, current_app, jsonify, render_template, request
+from flask import Blueprint, Response, current_app, jsonify, render_template
 from flask.typing import ResponseReturnValue
 from flask_login import current_user, login_required
+from webargs.flaskparser import use_args
 
 from cloudsim.competition.views import bandwidth_plots_of
 from cloudsim.config import Config
-from cloudsim.errors import InvalidInput
 from cloudsim.viewer import live, service
+from cloudsim.viewer.schemas import FramesQuery, LiveQuery
 
 bp = Blueprint("viewer", __name__)
-
-
-def _number(name: str, default: float) -> float:
-    raw = request.args.get(name)
-    if raw is None:
-        return default
-    try:
-        value = float(raw)
-    except ValueError:
-        raise InvalidInput(f"{name} must be a number") from None
-    if not math.isfinite(value):
-        raise InvalidInput(f"{name} must be a finite number")
-    return value
 
 
 @bp.route("/runs/<int:run_id>/view")
@@ -52,16 +40,17 @@ def scene(run_id: int) -> ResponseReturnValue:
 
 @bp.route("/runs/<int:run_id>/view/frames")
 @login_required
-def frames(run_id: int) -> ResponseReturnValue:
+@use_args(FramesQuery(), location="query")
+def frames(query: dict[str, float], run_id: int) -> ResponseReturnValue:
     config: Config = current_app.config["CLOUDSIM"]
-    start, seconds = _number("start", 0.0), _number("seconds", 5.0)
-    return jsonify(service.replay_frames(current_user, run_id, start, seconds, config))
+    frames = service.replay_frames(current_user, run_id, query["start"], query["seconds"], config)
+    return jsonify(frames)
 
 
 @bp.route("/runs/<int:run_id>/view/live")
 @login_required
-def live_frames(run_id: int) -> ResponseReturnValue:
+@use_args(LiveQuery(), location="query")
+def live_frames(query: dict[str, Any], run_id: int) -> ResponseReturnValue:
     config: Config = current_app.config["CLOUDSIM"]
-    after, viewer = _number("after", -1.0), request.args.get("viewer", "")
-    body = live.live_answer(current_user, run_id, after, viewer, config)
+    body = live.live_answer(current_user, run_id, query["after"], query["viewer"], config)
     return Response(body, mimetype="application/json")
