@@ -29,6 +29,7 @@ from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.models import Role, Run, User
 from cloudsim.people.service import visible_teams
+from cloudsim.web import format_datetime
 from cloudsim.web.downloads import attachment
 
 bp = Blueprint("competition", __name__)
@@ -140,6 +141,7 @@ def run(run_id: int) -> ResponseReturnValue:
         score_plot=_score_plot(shown),
         bandwidth_plots=bandwidth_plots_of(shown),
         bits_left=_bits_left(shown),
+        caps_spent=_caps_spent(shown),
         confirm=ConfirmForm(),
     )
 
@@ -169,6 +171,16 @@ def _bits_left(run: Run) -> dict[str, int]:
     }
 
 
+def _caps_spent(run: Run) -> str:
+    """Say which caps are spent and since when (the page and its live updates show this text)."""
+    spent = [
+        f"{direction} spent since {format_datetime(at, True)} UTC (traffic that way is dropped)"
+        for direction, at in (("uplink", run.uplink_spent_at), ("downlink", run.downlink_spent_at))
+        if at is not None
+    ]
+    return "; ".join(spent) or "none"
+
+
 @bp.route("/runs/<int:run_id>/status")
 @login_required
 def run_status(run_id: int) -> ResponseReturnValue:
@@ -184,6 +196,7 @@ def run_status(run_id: int) -> ResponseReturnValue:
         error=shown.error,
         bits_left=_bits_left(shown),
         # a spent direction is dropped from then on: say so, not only "bits left"
+        caps_spent=_caps_spent(shown),
         spent_since={
             "uplink": shown.uplink_spent_at.isoformat() if shown.uplink_spent_at else None,
             "downlink": shown.downlink_spent_at.isoformat() if shown.downlink_spent_at else None,

@@ -53,7 +53,9 @@ def test_a_spent_cap_shows_with_its_time_on_the_status_and_the_api(
     status = client.get(f"/runs/{run.id}/status").get_json()
     assert status["spent_since"]["uplink"] and status["spent_since"]["downlink"] is None
     page = client.get(f"/runs/{run.id}").get_data(as_text=True)
-    assert "uplink spent since" in page
+    # the page and its live updates show one text, with the time as the page writes times
+    shown = f"uplink spent since {spent:%Y-%m-%d %H:%M:%S} UTC (traffic that way is dropped)"
+    assert status["caps_spent"] == shown and f'class="error">{shown}</dd>' in page
     final = {"uplink": {"spent_at": "2026-11-22T20:00:01.000+00:00"}, "downlink": {}}
     usage = read_bandwidth_log(
         [json.dumps({"time": "2026-11-22T20:00:02+00:00", "event": "disarmed", "counters": final})]

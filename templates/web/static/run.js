@@ -27,9 +27,9 @@
       document.getElementById("run-error").textContent = data.error || "";
       document.getElementById("uplink-left").textContent = data.bits_left.uplink.toLocaleString("en-US");
       document.getElementById("downlink-left").textContent = data.bits_left.downlink.toLocaleString("en-US");
-      const spent = ["uplink", "downlink"].filter((d) => data.spent_since[d])
-        .map((d) => d + " spent since " + data.spent_since[d] + " (traffic that way is dropped)");
-      document.getElementById("caps-spent").textContent = spent.join("; ") || "none";
+      const caps = document.getElementById("caps-spent");
+      caps.textContent = data.caps_spent;
+      caps.className = data.caps_spent === "none" ? "" : "error";
       if (settled.includes(data.state)) { location.reload(); return; }
     } catch (e) { /* the server may be restarting: keep trying */ }
     setTimeout(poll, 1000);
