@@ -60,3 +60,17 @@ def test_estimate_does_not_touch_the_physics(make_sim) -> None:
         second.snapshot()
     assert first.state_vector() == second.state_vector()
     assert first.snapshot()["pelvis"] == second.snapshot()["pelvis"]
+
+
+def test_sensors_are_computed_only_for_subscribed_topics(make_sim) -> None:
+    published: list[str] = []
+    sim = make_sim("vrc_task_2", "1", publish=lambda topic, _: published.append(topic))
+    noise = sim.sensors.rngs  # each sensor draws its noise from its own generator
+    fresh = {topic: rng.bit_generator.state for topic, rng in noise.items()}
+    sim.step(200)
+    assert {rng.bit_generator.state == fresh[t] for t, rng in noise.items()} == {True}
+    assert set(published) == {"clock", "score"}
+    sim.active_topics = {"imu"}
+    sim.step(200)
+    assert {t for t, rng in noise.items() if rng.bit_generator.state != fresh[t]} == {"imu"}
+    assert published.count("imu") == 20 and set(published) == {"clock", "score", "imu"}
