@@ -16,6 +16,7 @@ from drcsim.client import SimClient
 from drcsim.engine import RunOptions, Simulation
 from drcsim.errors import ClientError, DrcsimError
 from drcsim.protocol import check_command, encode
+from drcsim.scene import TIMESTEP
 from drcsim.sensors import SENSOR_TOPICS, SensorSettings
 from drcsim.worlds import WORLD_NAMES
 
@@ -39,7 +40,7 @@ def measure_rtf(
         x, y, yaw = sim.spec.robot_start
         walk = {"op": "behaviour", "name": "walk", "pose": [x + 1.0, y, yaw]}
         sim.apply_command(check_command({**walk, "balance": balance}))
-        steps = round(seconds / 0.001)
+        steps = round(seconds / TIMESTEP)
         started = time.perf_counter()
         sim.step(steps)
         wall = time.perf_counter() - started

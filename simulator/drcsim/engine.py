@@ -18,13 +18,12 @@ from drcsim.driving import VehicleDrive
 from drcsim.errors import CommandError
 from drcsim.estimator import Estimator
 from drcsim.runlog import RunLog, state_digest
-from drcsim.scene import TIMESTEP, build_scene
+from drcsim.scene import TICK_STEPS, TIMESTEP, build_scene
 from drcsim.scoring import GateFrame, Observation, Scorer
 from drcsim.sensors import Sensors, SensorSettings
 from drcsim.viewer import PoseStream
 from drcsim.worlds import load_world
 
-TICK_STEPS = 10  # physics steps per 100 Hz tick (falls, scoring, state log, clock)
 Publisher = Callable[[str, dict[str, Any]], None]
 
 

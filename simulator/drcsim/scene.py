@@ -17,6 +17,7 @@ from drcsim.urdf import Robot
 from drcsim.worlds import WorldSpec
 
 TIMESTEP = 0.001
+TICK_STEPS = 10  # physics steps per 100 Hz tick: scoring, state log, clock, walking pattern
 SOLVER_ITERATIONS = 20
 MODEL_CACHE = Path(tempfile.gettempdir()) / "drcsim-models"
 

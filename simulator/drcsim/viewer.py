@@ -14,9 +14,9 @@ from pathlib import Path
 from typing import Any
 
 from drcsim._bullet import BulletClient, pybullet
+from drcsim.scene import TICK_STEPS
 
 FORMAT = 1
-TICK_STEPS = 10  # physics steps per state-log record (100 Hz)
 POSE_DECIMALS = 6  # micrometres: far below what a viewer (or a 1 mm comparison) resolves
 GEOMETRY = {
     pybullet.GEOM_SPHERE: "sphere",

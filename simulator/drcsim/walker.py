@@ -29,7 +29,7 @@ from drcsim.gait import (
     timeline,
 )
 from drcsim.models.humanoid import ALL_JOINTS
-from drcsim.scene import Scene
+from drcsim.scene import TICK_STEPS, Scene
 
 LEGS = {
     side: [f"{side[0]}_leg_{j}" for j in ("hpz", "hpx", "hpy", "kny", "aky", "akx")]
@@ -46,7 +46,6 @@ GAINS = {
     "aky": (6000, 50),
     "akx": (6000, 50),
 }
-TICK = 10  # physics steps per pattern-generator tick (100 Hz)
 TILT_GAIN = 1.0  # ankle and hip correction per radian of pelvis tilt (IMU)
 COM_GAIN = 3.0  # pelvis shift per metre of error of the measured centre of mass...
 COM_VELOCITY = 0.5  # ...with this share of its velocity term (capture point)
@@ -185,7 +184,7 @@ class Walker:
     def apply(self) -> None:
         """Compute this physics step's leg joint targets."""
         self.steps += 1
-        if self.steps % TICK == 1 or TICK == 1:
+        if self.steps % TICK_STEPS == 1 or TICK_STEPS == 1:
             self._pattern_tick()
         self._joints()
 
@@ -229,7 +228,9 @@ class Walker:
 
     def _swing_foot(self, swing: Swing) -> Foothold:
         span = max(1, swing.last - swing.first)
-        tau = min(1.0, max(0.0, (self.tick + (self.steps % TICK) / TICK - swing.first) / span))
+        tau = min(
+            1.0, max(0.0, (self.tick + (self.steps % TICK_STEPS) / TICK_STEPS - swing.first) / span)
+        )
         s = tau * tau * (3 - 2 * tau)
         a, b = swing.start, swing.end
         dyaw = (b.yaw - a.yaw + math.pi) % (2 * math.pi) - math.pi
@@ -243,7 +244,7 @@ class Walker:
 
     def _joints(self) -> None:
         # The pattern runs at 100 Hz; the joints follow its COM interpolated at 1 kHz.
-        share = ((self.steps - 1) % TICK + 1) / TICK
+        share = ((self.steps - 1) % TICK_STEPS + 1) / TICK_STEPS
         self.com = self.com_from + (self.com_to - self.com_from) * share
         feet = dict(self.feet)
         swing = self.active
@@ -278,11 +279,12 @@ class Walker:
         # Centre-of-mass feedback: steer the pelvis against the measured COM's (and capture
         # point's) error, the COM measured from the links' poses (kinematics and IMU).
         omega = math.sqrt(9.81 / (float(self.offset[2]) + self.params.pelvis_height))
-        ref_velocity = (self.com_to - self.com_from) / (TICK * self.controller.timestep)
-        if (self.steps - 1) % TICK == 0:
+        ref_velocity = (self.com_to - self.com_from) / (TICK_STEPS * self.controller.timestep)
+        if (self.steps - 1) % TICK_STEPS == 0:
             whole = self._whole_com()
             self.velocity += (
-                (whole - self.com_measured) / (TICK * self.controller.timestep) - self.velocity
+                (whole - self.com_measured) / (TICK_STEPS * self.controller.timestep)
+                - self.velocity
             ) * VELOCITY_FILTER
             self.com_measured = whole
         measured = self.com_measured + COM_VELOCITY * self.velocity / omega
