@@ -38,6 +38,7 @@ if [ ! -f "$vendor/.stamp" ] || [ "$(cat "$vendor/.stamp")" != "$npm_digest" ]; 
     if ! command -v npm >/dev/null; then
         # Debian's nodejs comes without npm (nodesource's carries it): add Debian's npm
         [ "$(id -u)" = 0 ] || { echo "install: npm is missing; install it (apt-get install npm)" >&2; exit 1; }
+        apt-get update -qq  # the package block above may not have run: no lists yet
         DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends npm >/dev/null
     fi
     echo "install: npm ci (three.js)"
