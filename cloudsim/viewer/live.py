@@ -16,6 +16,7 @@ import time
 from typing import Any
 
 import redis
+from drcsim.client import DEFAULT_COMMAND_PORT
 from flask import current_app
 
 from cloudsim.competition.jobs import DRCSIM, machines
@@ -33,7 +34,6 @@ log = logging.getLogger(__name__)
 BUFFER_SECONDS = 10  # of simulated time kept for viewers
 VIEWER_TTL_S = 15  # a viewer that has not polled this long no longer counts
 RELAY_LEASE_S = 20  # a relay that has not renewed this long is presumed dead
-SIM_COMMAND_PORT = 7700  # drcsim serve's default, which the run's simulator uses
 WATCH_CHUNK_S = 120  # one `drcsim watch` call; the relay starts another while viewers remain
 CHECK_EVERY_S = 1.0
 RETRY_AFTER_FAILURE_S = 30
@@ -177,7 +177,7 @@ def follow_simulator(
     relay: _Relay,
     *,
     drcsim: str = DRCSIM,
-    port: int = SIM_COMMAND_PORT,
+    port: int = DEFAULT_COMMAND_PORT,  # the run's simulator serves on drcsim's default
     chunk_s: int = WATCH_CHUNK_S,
 ) -> None:
     """Run `drcsim watch` on the sim machine, chunk after chunk, until the relay stops.
