@@ -63,6 +63,7 @@ def login() -> ResponseReturnValue:
             record("auth.login", user, target_type="user", target_id=user.id, team_id=user.team_id)
             return redirect(_safe_next(request.args.get("next")))
         record("auth.login_failed", None, target_type="user", target_id=None, email=email)
+        db.session.commit()  # kept although the answer is a refusal, which commits nothing
         flash("Wrong e-mail or password.", "error")
         return render_template("auth/login.html", form=form), 401
     status = 400 if request.method == "POST" else 200

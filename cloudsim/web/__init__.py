@@ -34,10 +34,15 @@ def register_web(app: Flask) -> None:
     app.jinja_env.filters["b64encode"] = _b64encode
 
     @app.after_request
-    def commit(response: Response) -> Response:
-        # A request is a transaction boundary: what it changed is committed once, here; the
-        # error handlers below roll back first, so a failed request commits nothing.
-        db.session.commit()
+    def end_transaction(response: Response) -> Response:
+        # A request is a transaction boundary: a success commits what it changed, once, here.
+        # A refusal commits nothing, whether an error handler below drew it or the view itself
+        # showed its form again with the service's error (a view whose service may have failed
+        # a flush still rolls back itself first: drawing the page reads the database).
+        if response.status_code < 400:
+            db.session.commit()
+        else:
+            db.session.rollback()
         return response
 
     @app.errorhandler(CloudSimError)

@@ -24,3 +24,21 @@ def test_cloudsim_itself_is_an_explicit_actor(app: Flask) -> None:
     db.session.commit()
     event = db.session.scalar(select(AuditEvent).where(AuditEvent.action == "team.create"))
     assert event is not None and event.actor == "system" and event.actor_id is None
+
+
+def test_a_request_commits_its_success_and_nothing_of_a_refusal(app: Flask) -> None:
+    """A view that shows its form again with a service's error commits nothing it flushed."""
+
+    @app.post("/_test/team/<name>/<int:status>")
+    def make_team(name: str, status: int) -> tuple[str, int]:
+        create_team(SYSTEM, name)  # flushed, then the view answers with `status`
+        return name, status
+
+    app.config["WTF_CSRF_ENABLED"] = False
+    client = app.test_client()
+    refused = client.post("/_test/team/Refused/400")
+    assert (refused.status_code, refused.get_data(as_text=True)) == (400, "Refused")
+    assert client.post("/_test/team/Kept/201").status_code == 201
+    db.session.remove()  # look with a fresh session: what did the requests commit?
+    names = set(db.session.scalars(select(Team.name)))
+    assert names == {"Kept"}
