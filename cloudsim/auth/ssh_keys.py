@@ -119,7 +119,7 @@ def delete_key(user: User, key_id: int) -> None:
     """Remove one of the user's own keys; it stops working on the field computers at once."""
     key = db.session.get(SshKey, key_id)
     if key is None or key.user_id != user.id:
-        raise NotFound(f"SSH key {key_id} not found")
+        raise NotFound.of("SSH key", key_id)
     db.session.delete(key)
     record(
         "ssh_key.delete",

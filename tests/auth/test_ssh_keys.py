@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 from pathlib import Path
 
@@ -130,22 +131,34 @@ def test_the_account_form_adds_a_key_and_the_team_computers_get_it(
     assert len(db.session.scalars(select(SshKey)).all()) == 1
 
 
-def test_a_generated_key_is_shown_once_and_only_its_public_half_kept(
+def test_a_generated_key_is_shown_once_kept_public_and_removed_from_the_page(
     app: Flask, client: FlaskClient, people: dict[str, User | None]
 ) -> None:
+    """As a stranger would: "Make a key for me", then the key's "Remove" button."""
     user = people["user_a"]
-    assert user is not None
+    assert user is not None and user.team_id is not None
+    constellation = _ready_vrc(user.team_id)
     log_in(client, user)
     page = client.get("/account").get_data(as_text=True)
+    # what the browser sends for that button: the form's (empty) fields and the button's value
     response = client.post(
-        "/account/ssh-keys", data={"csrf_token": csrf_token(page), "generate": "1"}
+        "/account/ssh-keys",
+        data={"csrf_token": csrf_token(page), "name": "", "public_key": "", "generate": "1"},
     )
     html = response.get_data(as_text=True)
     assert response.status_code == 200 and "BEGIN OPENSSH PRIVATE KEY" in html
     assert 'download="cloudsim_ed25519"' in html
-    assert "PRIVATE KEY" not in client.get("/account").get_data(as_text=True)
+    page = client.get("/account").get_data(as_text=True)
+    assert "PRIVATE KEY" not in page
     [stored] = db.session.scalars(select(SshKey)).all()
     assert stored.key_type == "ssh-ed25519" and "PRIVATE" not in stored.public_key
+    assert len(team_keys(user.team_id)) == 1
+    before = _refreshes(constellation)
+    [action] = re.findall(r'<form class="inline" method="post" action="([^"]+/delete)"', page)
+    response = client.post(action, data={"csrf_token": csrf_token(page)})
+    assert response.status_code == 302
+    assert "No SSH keys." in client.get("/account").get_data(as_text=True)
+    assert team_keys(user.team_id) == () and _refreshes(constellation) == before + 1
 
 
 def test_the_api_adds_lists_generates_and_deletes_own_keys_only(
