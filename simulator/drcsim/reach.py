@@ -35,7 +35,7 @@ class Reach:
         self.target = np.array(target, dtype=float)
         self.frame = frame
         self.link = scene.robot_links[humanoid.HAND_LINKS[side]]
-        self.slots = [controller.slot[name] for name in ARM_JOINTS[side]]
+        self.slots = np.array([controller.slot[name] for name in ARM_JOINTS[side]])
         self.joint_targets = controller.position[self.slots].copy()
         client = scene.client
         # Points are kept in the hand's URDF link frame: calculateJacobian works in that frame.
@@ -86,5 +86,4 @@ class Reach:
 
     def apply(self) -> None:
         """Hold the arm's joint targets."""
-        for slot, value in zip(self.slots, self.joint_targets, strict=True):
-            self.controller.set_position(self.controller.names[slot], float(value))
+        self.controller.set_slot_positions(self.slots, self.joint_targets)
