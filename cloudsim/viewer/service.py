@@ -84,6 +84,17 @@ class _Replays:
                     old.close()
             return entry
 
+    def frames(self, run_id: int, folder: Path, start: float, stop: float) -> list[dict[str, Any]]:
+        """Return the frames of a run's state log from `start` to `stop` (simulated seconds)."""
+        while True:
+            poses, lock = self.get(run_id, folder)
+            with lock:
+                # another request may have closed it between get() and here: open it again
+                # (one dict lookup, not self.lock: an eviction holds that while it waits for ours)
+                current = self.open.get(run_id)
+                if current is not None and current[0] is poses:
+                    return list(poses.frames(REPLAY_EVERY, start, stop))
+
 
 _replays = _Replays()
 
@@ -140,9 +151,7 @@ def replay_frames(
         raise Conflict(f"run {run.id} is {run.state.value}: watch it live, replay it afterwards")
     if not (start >= 0 and 0 < seconds <= MAX_CHUNK_SECONDS):
         raise InvalidInput(f"start must be >= 0 and seconds within (0, {MAX_CHUNK_SECONDS:g}]")
-    poses, lock = _replays.get(run.id, _local_logs(run, config))
-    with lock:
-        frames = list(poses.frames(REPLAY_EVERY, start, start + seconds))
+    frames = _replays.frames(run.id, _local_logs(run, config), start, start + seconds)
     return {"start": start, "seconds": seconds, "frames": frames}
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 from flask import Flask
@@ -158,3 +159,26 @@ def test_the_replay_cache_keeps_the_most_recently_viewed_runs_only(
     assert sorted(f.name for f in cache.iterdir()) == [f"run-{second.id}", f"run-{third.id}"]
     replay(first.id)  # copied again when asked for
     assert sorted(f.name for f in cache.iterdir()) == [f"run-{first.id}", f"run-{third.id}"]
+
+
+def test_a_replay_closed_by_another_request_meanwhile_is_opened_again(
+    app: Flask, people: dict[str, User | None], run_logs: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(viewer_service, "OPEN_REPLAYS", 1)
+    user_a = people["user_a"]
+    assert user_a is not None and user_a.team is not None
+    mine, other = store_run(user_a.team, run_logs), store_run(user_a.team, run_logs)
+    other_logs = viewer_service._local_logs(other, app.config["CLOUDSIM"])
+    opened = viewer_service._Replays.get
+    raced: list[int] = []
+
+    def get_then_evicted(self: Any, run_id: int, folder: Path) -> Any:
+        entry = opened(self, run_id, folder)
+        if run_id == mine.id and not raced:  # another request opens its run: ours is closed
+            raced.append(run_id)
+            opened(self, other.id, other_logs)
+        return entry
+
+    monkeypatch.setattr(viewer_service._Replays, "get", get_then_evicted)
+    answer = _client(app, user_a).get(f"/runs/{mine.id}/view/frames?start=2&seconds=1")
+    assert raced and answer.status_code == 200 and len(answer.get_json()["frames"]) == 33
