@@ -10,6 +10,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from drcsim.commands import BALANCE
+from drcsim.controllers import CONTROLLERS
 from drcsim.errors import DrcsimError
 from drcsim.worlds import CONFIG_NAMES, WORLD_NAMES, load_world
 
@@ -139,7 +141,6 @@ def cmd_ladder(args: argparse.Namespace) -> int:
 def cmd_example(args: argparse.Namespace) -> int:
     """Run a reference team controller (the example one by default) against a server."""
     from drcsim.client import SimClient
-    from drcsim.controllers import CONTROLLERS
 
     with SimClient(args.server, args.port, timeout_s=10.0) as client:
         controller = CONTROLLERS[args.style](
@@ -228,16 +229,16 @@ def build_parser() -> argparse.ArgumentParser:
     example.add_argument("--port", type=int, default=7700)
     example.add_argument("--world", choices=WORLD_NAMES)
     example.add_argument("--timeout", type=float, default=900.0, help="wall seconds")
-    example.add_argument("--style", default="example", choices=["naive", "example", "careful"])
-    example.add_argument("--balance", default="harness", choices=["harness", "joints"])
+    example.add_argument("--style", default="example", choices=list(CONTROLLERS))
+    example.add_argument("--balance", default="harness", choices=BALANCE)
     example.set_defaults(func=cmd_example)
     ladder = sub.add_parser("ladder", help="reference controllers x worlds x configurations")
-    ladder.add_argument("--controller", action="append", choices=["naive", "example", "careful"])
+    ladder.add_argument("--controller", action="append", choices=list(CONTROLLERS))
     ladder.add_argument("--world", action="append", choices=WORLD_NAMES)
     ladder.add_argument("--config", action="append", choices=CONFIG_NAMES)
     ladder.add_argument("--time-limit", type=float, default=600.0, help="simulated s per run")
     ladder.add_argument("--jobs", type=int, default=None, help="parallel runs (default: cores)")
-    ladder.add_argument("--balance", default="harness", choices=["harness", "joints"])
+    ladder.add_argument("--balance", default="harness", choices=BALANCE)
     ladder.add_argument("--json", action="store_true")
     ladder.set_defaults(func=cmd_ladder)
     follow = sub.add_parser(

@@ -7,6 +7,7 @@ from typing import Any
 
 import msgpack
 
+from drcsim.commands import BALANCE
 from drcsim.driving import DIRECTIONS
 from drcsim.errors import ProtocolError
 from drcsim.models.humanoid import JOINT_NAMES
@@ -15,7 +16,6 @@ MAX_MESSAGE_BYTES = 64 * 1024
 MAX_STEPS = 10_000
 HANDS = ("left", "right")
 FRAMES = ("world", "pelvis")
-BALANCE = ("harness", "joints")
 OPS = ("hello", "state", "step", "joints", "behaviour", "stop")
 # Behaviour name -> its parameters and their kinds ("hand", "vec3", "float", "bool", "direction").
 BEHAVIOURS: dict[str, dict[str, str]] = {
