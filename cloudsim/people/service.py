@@ -19,6 +19,7 @@ from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import ConstellationState, Role, Team, User
 from cloudsim.people.access import revoke_before_delete, revoke_team_access
+from cloudsim.web.inputs import as_id
 
 TEAM_NAME_MAX = 80
 
@@ -61,8 +62,8 @@ def get_team(actor: Actor, team_id: int) -> Team:
 def find_team(name_or_id: str) -> Team:
     """Return the team with this name or numeric id (for the CLI)."""
     team = db.session.scalar(select(Team).where(Team.name == name_or_id.strip()))
-    if team is None and name_or_id.isdigit():
-        team = db.session.get(Team, int(name_or_id))
+    if team is None and (team_id := as_id(name_or_id.strip())) is not None:
+        team = db.session.get(Team, team_id)
     if team is None:
         raise NotFound(f"no team named {name_or_id!r}")
     return team
@@ -175,8 +176,8 @@ def find_user(email_or_id: str) -> User:
     """Return the user with this e-mail address or numeric id (for the CLI)."""
     text = email_or_id.strip()
     user = db.session.scalar(select(User).where(User.email == text.lower()))
-    if user is None and text.isdigit() and len(text) < 10:
-        user = db.session.get(User, int(text))
+    if user is None and (user_id := as_id(text)) is not None:
+        user = db.session.get(User, user_id)
     if user is None:
         raise NotFound(f"no user {email_or_id!r}")
     return user

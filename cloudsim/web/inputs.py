@@ -169,14 +169,21 @@ def query_int(name: str, default: int, minimum: int = 0, maximum: int = INT32_MA
         return default
 
 
+def as_id(text: str) -> int | None:
+    """Return text as a row id the database can hold (a command's argument), else None."""
+    if not text.isascii() or not text.isdigit() or len(text) > 10 or int(text) > INT32_MAX:
+        return None
+    return int(text)
+
+
 def query_id(name: str) -> int | None:
     """Return a page's query parameter naming a row, None when absent; 400 when not an id."""
     raw = request.args.get(name)
     if raw is None:
         return None
-    if not raw.isascii() or not raw.isdigit() or len(raw) > 10 or int(raw) > INT32_MAX:
+    if (value := as_id(raw)) is None:
         raise BadRequest(f"{name} must be a positive whole number below {INT32_MAX + 1}")
-    return int(raw)
+    return value
 
 
 def init_inputs(app: Flask) -> None:

@@ -9,11 +9,11 @@ from flask import Flask
 from sqlalchemy import select
 
 from cloudsim.auth.policy import SYSTEM
-from cloudsim.errors import Conflict
+from cloudsim.errors import Conflict, NotFound
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import vpn
 from cloudsim.models import AuditEvent, Constellation, ConstellationState, Job, Machine, Role, User
-from cloudsim.people.service import delete_user, update_user
+from cloudsim.people.service import create_team, delete_user, find_team, find_user, update_user
 from provisioners.remote import pki
 from tests.conftest import csrf_token, log_in, make_user, token_for
 
@@ -165,3 +165,14 @@ def test_an_officer_moves_and_disables_a_user_from_the_users_page(
     moved = db.session.get(User, user.id)
     assert moved is not None
     assert (moved.team_id, moved.active, moved.name) == (team_b, False, "Moved")
+
+
+@pytest.mark.postgres
+@pytest.mark.parametrize("ref", ["99999999999", "2147483648", "0" * 30 + "7", "\u00b2"])
+def test_a_command_naming_a_team_or_user_by_an_impossible_id_is_told_none(
+    any_db_app: Flask, ref: str
+) -> None:
+    create_team(SYSTEM, "Seven")  # id 1: "...7" must not reach it by an int() of any length
+    for find in (find_team, find_user):
+        with pytest.raises(NotFound):
+            find(ref)  # PostgreSQL refused such ids with a DataError: a traceback in the CLI
