@@ -14,8 +14,11 @@ from flask import Flask
 from cloudsim import extensions  # not `db`: that name is the `cloudsim db` submodule
 from cloudsim.config import Config, ConfigError
 from cloudsim.errors import CloudSimError
+from cloudsim.web.inputs import INT32_MAX
 
 F = TypeVar("F", bound=Callable[..., Any])
+# A row's id as a command's argument: one the database can hold, else click's usage error.
+ID = click.IntRange(1, INT32_MAX)
 
 
 class AppHolder:

@@ -9,7 +9,7 @@ import click
 
 from cloudsim.auth import ssh_keys
 from cloudsim.auth.policy import SYSTEM
-from cloudsim.cli import app_context, emit, reports_errors
+from cloudsim.cli import ID, app_context, emit, reports_errors
 from cloudsim.errors import InvalidInput
 from cloudsim.models import Role, SshKey, Team, User
 from cloudsim.people import service
@@ -212,7 +212,7 @@ def list_ssh_keys(email: str, as_json: bool) -> None:
 
 @ssh_key.command("remove")
 @click.argument("email")
-@click.argument("key_id", type=int)
+@click.argument("key_id", type=ID)
 @reports_errors
 def remove_ssh_key(email: str, key_id: int) -> None:
     """Remove EMAIL's key KEY_ID; it stops working on the field computers at once."""

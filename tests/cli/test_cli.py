@@ -239,5 +239,9 @@ def test_ssh_keys_of_a_user_are_added_listed_refused_and_removed(
     generated = run("user", "ssh-key", "add", "k@example.org", "--generate")
     assert generated.exit_code == 0 and "BEGIN OPENSSH PRIVATE KEY" in generated.output
     assert run("user", "ssh-key", "remove", "k@example.org", str(key["id"])).exit_code == 0
+    gone = run("user", "ssh-key", "remove", "k@example.org", str(key["id"]))
+    assert gone.exit_code == 1 and f"SSH key {key['id']} not found" in gone.output
+    huge = run("user", "ssh-key", "remove", "k@example.org", "99999999999")
+    assert huge.exit_code == 2 and "Traceback" not in huge.output  # click's usage error
     listed = run("user", "ssh-key", "list", "k@example.org").output
     assert key["fingerprint"] not in listed and "made by CloudSim" in listed
