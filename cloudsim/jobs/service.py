@@ -73,7 +73,7 @@ def start_maintenance(kind: str, actor: Actor) -> Job:
 @event.listens_for(Session, "after_commit")
 def _send_committed(session: Session) -> None:
     for job_id in session.info.pop(UNSENT, []):
-        send_id(job_id)
+        send(job_id)
 
 
 @event.listens_for(Session, "after_rollback")
@@ -99,13 +99,8 @@ def run_here(job_id: str) -> None:
         log.info("job %s failed in-process", job_id, exc_info=True)
 
 
-def send(job: Job) -> bool:
-    """Put the job's message on the queue; return False (and log) when the broker is down."""
-    return send_id(job.id)
-
-
-def send_id(job_id: str) -> bool:
-    """Put a saved job's message on the queue; False (logged) when that fails."""
+def send(job_id: str) -> bool:
+    """Put a saved job's message on the queue; False (logged) when the broker is down."""
     try:
         run_job.apply_async(args=[job_id], task_id=job_id, retry=False)
     except (OperationalError, OSError) as exc:
@@ -161,5 +156,5 @@ def sweep_jobs() -> int:
     sent = 0
     for job in lost_jobs():
         log.info("job %s (%s) looks lost; sending it again", job.id, job.state)
-        sent += send(job)
+        sent += send(job.id)
     return sent

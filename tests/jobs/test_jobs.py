@@ -114,8 +114,8 @@ def test_a_payload_is_stored_on_the_row_and_names_what_the_job_is_about(app: Fla
 def test_a_second_delivery_of_a_finished_job_does_nothing(app: Flask, worker: None) -> None:
     job = finished(enqueue("diagnostics", SYSTEM).id)
     log_before = job.log
-    send(job)
-    send(job)
+    send(job.id)
+    send(job.id)
     sentinel = finished(enqueue("diagnostics", SYSTEM).id)  # the solo worker runs in order
     assert sentinel.state == JobState.SUCCEEDED
     db.session.expire_all()
@@ -155,7 +155,7 @@ def test_a_live_job_is_not_taken_over(app: Flask, worker: None, markers: Path) -
     db.session.add(job)
     db.session.commit()
     assert lost_jobs() == []
-    send(job)
+    send(job.id)
     finished(enqueue("diagnostics", SYSTEM).id)
     db.session.expire_all()
     assert db.session.get(Job, job.id).attempts == 1 and not list(markers.iterdir())
