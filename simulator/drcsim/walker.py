@@ -57,6 +57,11 @@ YAW_TOLERANCE = 0.08
 MAX_REPLANS = 3  # plans without progress before the walk gives up
 SWING_FROM_ACTUAL = 0.5  # share of the pelvis's tracking error the swing foot allows for
 PLAN_STEPS = 8  # steps planned at a time: then both feet down and a fresh plan
+HIPS = {  # each hip joint in the pelvis frame (the right one mirrored)
+    side: np.array([HIP_OFFSET[0], sign * HIP_OFFSET[1], HIP_OFFSET[2]])
+    for side, sign in (("left", 1.0), ("right", -1.0))
+}
+HORIZONTAL = np.array([1.0, 1.0, 0.0])
 
 
 class Walker:
@@ -267,7 +272,7 @@ class Walker:
             if swing is not None and swing.side == side:
                 # The swing foot goes to its world target from where the pelvis really is.
                 base = np.array(where)
-                real = pelvis + SWING_FROM_ACTUAL * (base - pelvis) * np.array([1.0, 1.0, 0.0])
+                real = pelvis + SWING_FROM_ACTUAL * (base - pelvis) * HORIZONTAL
                 self._leg(side, foot, real, body, (0.0, 0.0), (roll, pitch))
             else:
                 self._leg(side, foot, pelvis, body, (roll, pitch), (roll, pitch))
@@ -303,8 +308,7 @@ class Walker:
         hip_tilt: tuple[float, float],
     ) -> None:
         """Set one leg's joint targets (IK plus tilt feedback) and velocity feed-forward."""
-        sign = 1.0 if side == "left" else -1.0
-        hip = pelvis + body @ np.array([HIP_OFFSET[0], sign * HIP_OFFSET[1], HIP_OFFSET[2]])
+        hip = pelvis + body @ HIPS[side]
         ankle = np.array([foot.x, foot.y, foot.z + ANKLE_TO_SOLE])
         angles = np.array(leg_ik(hip, body, ankle, rotation(0.0, 0.0, foot.yaw)))
         angles[4] += TILT_GAIN * ankle_tilt[1]  # stance ankle: the ankle strategy
