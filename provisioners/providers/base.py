@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 from libcloud.compute.base import (
@@ -31,6 +32,19 @@ from provisioners.remote.ssh import Route
 BEHIND_PUBLIC_MACHINE = "<public machine>"
 WAITING = (NodeState.PENDING, NodeState.STARTING, NodeState.REBOOTING)
 SSH_INTERFACES = ("public_ips", "private_ips")
+
+
+@dataclass
+class ProviderNetwork:
+    """A constellation's private network, as ex_create_network returns it and
+    create_node(ex_network=...) takes it; each provider keeps its own details in extra."""
+
+    id: str
+    name: str
+    cidr: str
+    gateway: str | None  # the address the machines route through, None: the provider's own
+    driver: Any = field(repr=False, compare=False)
+    extra: dict[str, Any] = field(default_factory=dict)
 
 
 class CloudSimNodeDriver(NodeDriver):  # type: ignore[misc]
@@ -61,15 +75,15 @@ class CloudSimNodeDriver(NodeDriver):  # type: ignore[misc]
         """
         raise NotImplementedError
 
-    def ex_create_network(self, name: str, cidr: str | None = None) -> Any:
+    def ex_create_network(self, name: str, cidr: str | None = None) -> ProviderNetwork:
         """Create the named private network (or return it when it exists)."""
         raise NotImplementedError
 
-    def ex_list_networks(self) -> list[Any]:
+    def ex_list_networks(self) -> Sequence[ProviderNetwork]:
         """Return the networks this driver made."""
         raise NotImplementedError
 
-    def ex_get_network(self, name: str) -> Any:
+    def ex_get_network(self, name: str) -> ProviderNetwork:
         """Return the named network, or raise the driver's NetworkNotFoundError."""
         raise NotImplementedError
 

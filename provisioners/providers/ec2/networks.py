@@ -3,10 +3,9 @@
 import ipaddress
 import re
 import time
-from dataclasses import dataclass, field
-from typing import Any
 from xml.etree.ElementTree import Element
 
+from provisioners.providers.base import ProviderNetwork
 from provisioners.providers.ec2.api import (
     NETWORK_TAG,
     EC2Api,
@@ -39,19 +38,11 @@ POLL_SECONDS = 2.0
 _NETWORK_NAME = re.compile(r"[a-z0-9][a-z0-9-]{0,62}\Z")
 
 
-@dataclass
-class EC2ConstellationNetwork:
+class EC2ConstellationNetwork(ProviderNetwork):
     """A constellation's network on EC2, as handed to create_node(ex_network=...).
 
     id is the VPC id, cidr the subnet's (and VPC's) block, gateway the VPC router's address.
     """
-
-    id: str
-    name: str
-    cidr: str
-    gateway: str | None
-    driver: Any = field(repr=False, compare=False)
-    extra: dict[str, Any] = field(default_factory=dict)
 
     @property
     def subnet_id(self) -> str:

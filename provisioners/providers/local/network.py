@@ -1,10 +1,9 @@
 """Private networks and the shared public network: bridges inside their own switch namespaces."""
 
 import time
-from dataclasses import dataclass, field
 from ipaddress import IPv4Network
-from typing import Any
 
+from provisioners.providers.base import ProviderNetwork
 from provisioners.providers.local import netns
 from provisioners.providers.local.addresses import (
     allocate_subnet,
@@ -28,16 +27,8 @@ from provisioners.providers.local.state import NetworkRecord, StateStore
 PUBLIC_NETWORK_NAME = "public"
 
 
-@dataclass
-class LocalNetwork:
+class LocalNetwork(ProviderNetwork):
     """A private network of the local provider, as handed to create_node(ex_network=...)."""
-
-    id: str
-    name: str
-    cidr: str
-    gateway: str | None
-    driver: Any = field(repr=False, compare=False)
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 class NetworkManager:

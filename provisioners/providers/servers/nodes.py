@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import datetime
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from libcloud.compute.base import Node
 
+from provisioners.providers.base import ProviderNetwork
 from provisioners.providers.servers.claims import node_state
 from provisioners.providers.servers.inventory import Server
 from provisioners.providers.servers.state import NetworkClaim, ServerClaim, ServersState
@@ -16,15 +16,8 @@ if TYPE_CHECKING:
     from provisioners.providers.servers.driver import ServersNodeDriver
 
 
-@dataclass
-class ServersNetwork:
+class ServersNetwork(ProviderNetwork):
     """A pre-made LAN in use under a network name, as handed to create_node(ex_network=...)."""
-
-    id: str
-    name: str
-    cidr: str
-    driver: Any = field(repr=False, compare=False)
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 def to_network(driver: ServersNodeDriver, claim: NetworkClaim) -> ServersNetwork:
@@ -33,6 +26,7 @@ def to_network(driver: ServersNodeDriver, claim: NetworkClaim) -> ServersNetwork
         id=claim.name,
         name=claim.name,
         cidr=claim.cidr,
+        gateway=None,  # the LAN's own, as the servers are set up
         driver=driver,
         extra={"lan": claim.lan, "created_at": claim.created_at},
     )
