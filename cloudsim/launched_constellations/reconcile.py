@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 from celery import shared_task
 from flask import current_app
+from libcloud.compute.base import Node
 from sqlalchemy import select
 
 from cloudsim.audit.service import record
@@ -47,8 +48,8 @@ def _providers_in_reach(config: Config) -> list[str]:
     return reachable
 
 
-def find_orphans(config: Config) -> list[Orphan]:
-    """Return every node whose constellation is unknown or already terminated."""
+def _orphan_nodes(config: Config) -> list[tuple[Orphan, Node]]:
+    """Return every node whose constellation is unknown or already terminated, with its node."""
     live = set(
         db.session.scalars(
             select(Constellation.name).where(Constellation.state != ConstellationState.TERMINATED)
@@ -59,19 +60,20 @@ def find_orphans(config: Config) -> list[Orphan]:
         for node in open_provider(provider, config).nodes():
             owner = node.extra.get("tags", {}).get("cloudsim:constellation")
             if owner not in live:
-                orphans.append(Orphan(provider, str(node.id), node.name, owner))
+                orphans.append((Orphan(provider, str(node.id), node.name, owner), node))
     return orphans
+
+
+def find_orphans(config: Config) -> list[Orphan]:
+    """Return every node whose constellation is unknown or already terminated."""
+    return [orphan for orphan, _ in _orphan_nodes(config)]
 
 
 def destroy_orphans(actor: Actor, config: Config) -> list[Orphan]:
     """Destroy every orphan node; return what was destroyed."""
-    orphans = find_orphans(config)
-    drivers = {p: open_provider(p, config).driver for p in {o.provider for o in orphans}}
-    for orphan in orphans:
-        driver = drivers[orphan.provider]
-        node = next((n for n in driver.list_nodes() if str(n.id) == orphan.node_id), None)
-        if node is not None:
-            driver.destroy_node(node)
+    orphans = _orphan_nodes(config)
+    for orphan, node in orphans:
+        node.destroy()
         record(
             "provider.orphan_destroyed",
             actor,
@@ -80,7 +82,7 @@ def destroy_orphans(actor: Actor, config: Config) -> list[Orphan]:
             provider=orphan.provider,
             name=orphan.name,
         )
-    return orphans
+    return [orphan for orphan, _ in orphans]
 
 
 @shared_task(name="cloudsim.launched_constellations.reconcile")
