@@ -2,7 +2,8 @@
 a key added in Chromium, the VPN bundle on a stock OpenVPN OCU, `ssh team@fc1` through the
 VPN, code copied between runs (no run's bits spent) and started with nohup, the run started
 in the browser and scored by the team's process; the simulator sealed; keys that stop working
-when their owner is disabled, and another team's that never work."""
+when their owner is disabled, and another team's that never work; sudo once an officer
+allows it."""
 
 from __future__ import annotations
 
@@ -173,6 +174,16 @@ def test_a_team_logs_in_deploys_its_code_and_scores_while_sim_stays_sealed(
         db.session.commit()  # the test is the boundary: its commit sends the refresh job
         wait_for(lambda: not as_team("bob", "true")[0], 60, "bob's key to stop working")
         assert as_team("alice", "true")[0]
+
+        # an officer lets the team use sudo with the documented body: pushed at once
+        officer = make_user(Role.OFFICER)
+        allowed = client.patch(
+            f"/api/v1/constellations/{constellation.id}",
+            json={"team_sudo": True},
+            headers=token_for(officer),
+        )
+        assert allowed.status_code == 200, allowed.get_json()
+        wait_for(lambda: as_team("alice", "sudo -n true")[0], 120, "sudo for the team")
 
 
 def reaches(executor: SSHExecutor, ocu: SSHTarget, address: str, port: int) -> bool:
