@@ -47,11 +47,10 @@ from constellations.plans import (
     needs_of,
 )
 from constellations.plans.roles import team_account
-from provisioners.providers.base import CloudSimNodeDriver
+from provisioners.providers.base import WAITING, CloudSimNodeDriver
 from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor, SSHTarget
 
 T = TypeVar("T")
-BOOTING = (NodeState.PENDING, NodeState.STARTING, NodeState.REBOOTING)
 
 
 class ProvisioningError(CloudSimError):
@@ -210,7 +209,7 @@ def ensure_machines(
     wanted = list(kind.machines)
     for definition in wanted:
         node = have.get(definition.name)
-        if node is not None and node.state in BOOTING:
+        if node is not None and node.state in WAITING:
             ctx.log(f"{definition.name}: still {node.state}; waiting for it")
             have[definition.name] = driver.wait_until_running([node])[0][0]
         elif node is not None and node.state != NodeState.RUNNING:
