@@ -82,16 +82,12 @@ def main() -> None:
                 three = wait(jobs)
                 spans = [db.session.get(Job, job_id) for job_id in jobs]
                 overlap = min(j.finished_at for j in spans) - max(j.started_at for j in spans)  # type: ignore[union-attr,type-var]
-                started = time.perf_counter()
                 terminate_one = wait([service.terminate(SYSTEM, "bench-one").id])
                 terminate_three = wait([service.terminate(SYSTEM, n).id for n in names])
     finally:
         with app.app_context():
-            driver = open_provider("local", app.config["CLOUDSIM"]).driver
-            for node in driver.list_nodes():  # whatever a failed run left behind
-                driver.destroy_node(node)
-            for network in driver.ex_list_networks():
-                driver.ex_destroy_network(network)
+            # whatever a failed run left behind
+            open_provider("local", app.config["CLOUDSIM"]).driver.ex_sweep()  # type: ignore[attr-defined]
         redis.stop()
     print("provisioning benchmark (local provider, vrc = router + sim + fc1 + fc2)")
     print(f"  wheelhouse build (once, cached)        {wheelhouse:6.1f} s")
