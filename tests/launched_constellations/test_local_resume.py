@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import pytest
 from celery.contrib.testing.worker import start_worker
 from flask import Flask
@@ -33,7 +31,9 @@ def test_launch_resumes_after_the_worker_is_killed_mid_machines(
             return db.session.get(Job, job.id).stage == "machines"  # type: ignore[union-attr]
 
         wait_for(creating, 120, "the machines stage")
-        time.sleep(1.5)  # some hosts booted, some half made
+        # killed once a first host exists: the others are still being made
+        provider = open_provider("local", constellations_config)
+        wait_for(lambda: provider.nodes(constellation.name), 60, "a first host")
     finally:
         kill_worker(process)
     db.session.expire_all()
