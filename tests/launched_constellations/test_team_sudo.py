@@ -9,21 +9,21 @@ from flask import Flask
 from flask.testing import FlaskClient
 from sqlalchemy import func, select
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.extensions import db
-from cloudsim.models import AuditEvent, Constellation, ConstellationState, Job, User
+from cloudsim.launched_constellations import service
+from cloudsim.models import AuditEvent, Constellation, Job, User
+from tests.competition.support import ready_constellation
 from tests.conftest import csrf_token, log_in, token_for
 
 
 def _constellation(team_id: int, kind: str = "vrc") -> Constellation:
-    constellation = Constellation(
-        name=f"sudo-{kind}",
-        kind=kind,
-        provider="local",
-        team_id=team_id,
-        state=ConstellationState.READY,
+    """Launch one (no worker takes the job) and mark it ready, as its launch would."""
+    constellation, _ = service.launch(
+        SYSTEM, name=f"sudo-{kind}", kind=kind, provider="local", team_id=team_id
     )
-    db.session.add(constellation)
     db.session.commit()
+    ready_constellation(constellation.id)
     return constellation
 
 
