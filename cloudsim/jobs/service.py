@@ -52,7 +52,7 @@ def enqueue(
         team_id=team_id,
         params=payload.to_params(),
         celery_id=job_id,
-        created_by_id=actor.id if actor else None,
+        created_by_id=actor.id,
     )
     db.session.add(job)
     record("job.start", actor, target_type="job", target_id=job_id, team_id=team_id, kind=kind)
@@ -121,7 +121,7 @@ def get_job(actor: Actor, job_id: str) -> Job:
 def visible_jobs(actor: Actor, *, state: str | None = None) -> Select[Job]:
     """Return a query for the jobs the actor may see, newest first."""
     query = select(Job).order_by(Job.created_at.desc(), Job.id)
-    if actor is not None and not actor.has_role(Role.OFFICER):
+    if not actor.has_role(Role.OFFICER):
         query = query.where(Job.team_id == actor.team_id, Job.team_id.is_not(None))
     if state:
         try:

@@ -72,7 +72,7 @@ def find_team(name_or_id: str) -> Team:
 def visible_teams(actor: Actor) -> list[Team]:
     """Return the teams the actor may see, by name."""
     query = select(Team).order_by(Team.name).options(selectinload(Team.members))
-    if actor is not None and not actor.has_role(Role.OFFICER):
+    if not actor.has_role(Role.OFFICER):
         query = query.where(Team.id == actor.team_id)
     return list(db.session.scalars(query))
 
@@ -164,7 +164,7 @@ class NewUser:
 
 def get_user(actor: Actor, user_id: int) -> User:
     """Return the user if it exists and the actor may see it (officers; or oneself)."""
-    if actor is not None and not actor.has_role(Role.OFFICER) and actor.id != user_id:
+    if not actor.has_role(Role.OFFICER) and actor.id != user_id:
         raise NotFound.of("user", user_id)
     user = db.session.get(User, user_id)
     if user is None:
@@ -186,7 +186,7 @@ def find_user(email_or_id: str) -> User:
 def visible_users(actor: Actor, team_id: int | None = None) -> list[User]:
     """Return the users the actor may see: officers all, users their own team's."""
     query = select(User).order_by(User.email).options(selectinload(User.team))
-    if actor is not None and not actor.has_role(Role.OFFICER):
+    if not actor.has_role(Role.OFFICER):
         query = query.where(User.team_id == actor.team_id)
     if team_id is not None:
         query = query.where(User.team_id == team_id)
@@ -196,7 +196,7 @@ def visible_users(actor: Actor, team_id: int | None = None) -> list[User]:
 def _check_manage(actor: Actor, role: Role) -> None:
     """Officers manage team users; only admins create or change officers and admins."""
     require_role(actor, Role.OFFICER, "manage users")
-    if actor is not None and role != Role.USER and not actor.has_role(Role.ADMIN):
+    if role != Role.USER and not actor.has_role(Role.ADMIN):
         raise Forbidden("only admins may manage officers and admins")
 
 
@@ -268,7 +268,7 @@ def update_user(
     _check_manage(actor, new_role)
     changes: dict[str, object] = {}
     old_team = user.team_id
-    if actor is not None and actor.id == user.id and (new_role != user.role or active is False):
+    if actor.id == user.id and (new_role != user.role or active is False):
         raise Forbidden("you cannot change your own role or disable yourself")
     if new_role != user.role and user.role == Role.ADMIN:
         _ensure_another_admin(user)
@@ -310,7 +310,7 @@ def delete_user(actor: Actor, user_id: int) -> None:
     """Delete a user (never oneself, never the last admin)."""
     user = get_user(actor, user_id)
     _check_manage(actor, user.role)
-    if actor is not None and actor.id == user.id:
+    if actor.id == user.id:
         raise Forbidden("you cannot delete your own account")
     if user.role == Role.ADMIN:
         _ensure_another_admin(user)

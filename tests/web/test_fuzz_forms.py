@@ -22,6 +22,7 @@ from flask.testing import FlaskClient
 from hypothesis import given
 from hypothesis import strategies as st
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import User
@@ -163,7 +164,7 @@ def _forms(
 ) -> list[Form]:
     """Return every distinct form on every page this persona can open."""
     team_a = people["user_a"].team  # type: ignore[union-attr]
-    job_id = enqueue("diagnostics", None, team_id=team_a.id).id
+    job_id = enqueue("diagnostics", SYSTEM, team_id=team_a.id).id
     constellation_id = db.session.scalar(
         db.select(db.text("id")).select_from(db.text("constellations"))
     )

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from flask import Flask, url_for
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Constellation, ConstellationState, Role, User
@@ -42,7 +43,7 @@ def test_not_yours_reads_exactly_like_not_there(
     assert len(HIDDEN) >= 15  # the routes the matrix hides from other teams
     app.config["WTF_CSRF_ENABLED"] = False
     team_a = people["user_a"].team  # type: ignore[union-attr]
-    job_id = enqueue("diagnostics", None, team_id=team_a.id).id
+    job_id = enqueue("diagnostics", SYSTEM, team_id=team_a.id).id
     constellation = Constellation(
         name="team-a-vrc", kind="vrc", provider="local", team_id=team_a.id
     )
