@@ -11,7 +11,7 @@ from drcsim.assists import Coupling, Grasps, Harness, Seat, Valve
 from drcsim.control import JointController
 from drcsim.driving import VehicleDrive
 from drcsim.errors import CommandError
-from drcsim.gait import GaitParameters
+from drcsim.gait import GaitParameters, wrap_angle
 from drcsim.models import humanoid
 from drcsim.reach import ARM_JOINTS, REACH_EVERY, Reach
 from drcsim.scene import Scene
@@ -28,10 +28,6 @@ SETTLE_STEPS = 3000  # physics steps the walk may spend closing the last centime
 PUSH_LIMIT = 150.0  # N of contact force against a movable object that stops a walk
 LEG_JOINTS = [s.name for s in humanoid.BODY_JOINTS if "_leg_" in s.name]
 TRUNK_JOINTS = ["back_bkz", "back_bky", "back_bkx", "neck_ry"]
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 class Behaviours:
@@ -270,7 +266,7 @@ class Behaviours:
         if self.settle_steps:
             self._settle(pos)
             return
-        heading_error = _wrap(math.atan2(gy - y, gx - x) - yaw) if distance > 1e-6 else 0.0
+        heading_error = wrap_angle(math.atan2(gy - y, gx - x) - yaw) if distance > 1e-6 else 0.0
         turn, advance = 0.0, 0.0
         if distance > POSITION_TOLERANCE / 2:
             if abs(heading_error) > 0.3 and distance > 0.2:
@@ -279,12 +275,12 @@ class Behaviours:
                 turn = max(-TURN_RATE * dt, min(TURN_RATE * dt, heading_error * dt * 2.0))
                 advance = min(speed * dt, distance)
         else:
-            yaw_error = _wrap(gyaw - yaw)
+            yaw_error = wrap_angle(gyaw - yaw)
             if abs(yaw_error) <= YAW_TOLERANCE / 2:
                 self._settle(pos)
                 return
             turn = math.copysign(min(TURN_RATE * dt, abs(yaw_error)), yaw_error)
-        yaw = _wrap(yaw + turn)
+        yaw = wrap_angle(yaw + turn)
         direction = math.atan2(gy - y, gx - x) if distance > 1e-6 else yaw
         self.pose_cmd = [x + advance * math.cos(direction), y + advance * math.sin(direction), yaw]
         self.phase += 2 * math.pi * (advance / STRIDE + abs(turn) / 1.5)
@@ -296,7 +292,10 @@ class Behaviours:
         _, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
         yaw = self.client.getEulerFromQuaternion(orn)[2]
         ex, ey = gx - pos[0], gy - pos[1]
-        if math.hypot(ex, ey) <= POSITION_TOLERANCE / 2 and abs(_wrap(gyaw - yaw)) <= YAW_TOLERANCE:
+        if (
+            math.hypot(ex, ey) <= POSITION_TOLERANCE / 2
+            and abs(wrap_angle(gyaw - yaw)) <= YAW_TOLERANCE
+        ):
             self.mode, self.walk_status, self.settle_steps = "stand", "done", 0
             return
         self.settle_steps += 1
@@ -311,8 +310,8 @@ class Behaviours:
         gain = self.controller.timestep * 2.0
         self.pose_cmd[0] += max(-0.001, min(0.001, ex * gain))
         self.pose_cmd[1] += max(-0.001, min(0.001, ey * gain))
-        self.pose_cmd[2] = _wrap(
-            self.pose_cmd[2] + max(-0.001, min(0.001, _wrap(gyaw - yaw) * gain))
+        self.pose_cmd[2] = wrap_angle(
+            self.pose_cmd[2] + max(-0.001, min(0.001, wrap_angle(gyaw - yaw) * gain))
         )
 
     def _pushing(self) -> str | None:

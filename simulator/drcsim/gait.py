@@ -97,7 +97,8 @@ class Foothold:
     yaw: float
 
 
-def _wrap(angle: float) -> float:
+def wrap_angle(angle: float) -> float:
+    """Return `angle` wrapped into [-pi, pi)."""
     return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
@@ -115,17 +116,17 @@ def plan_poses(
     if distance > 0.05:
         heading = math.atan2(gy - y, gx - x)
         # Short moves sideways or backwards are stepped without turning round.
-        if distance < 0.6 and abs(_wrap(heading - yaw)) > 0.6:
+        if distance < 0.6 and abs(wrap_angle(heading - yaw)) > 0.6:
             heading = yaw
-        while abs(_wrap(heading - yaw)) > 1e-3:
-            yaw = yaw + max(-turn_per_step, min(turn_per_step, _wrap(heading - yaw)))
+        while abs(wrap_angle(heading - yaw)) > 1e-3:
+            yaw = yaw + max(-turn_per_step, min(turn_per_step, wrap_angle(heading - yaw)))
             poses.append((x, y, yaw))
         count = max(1, math.ceil(distance / step_length))
         for i in range(1, count + 1):
             poses.append((x + (gx - x) * i / count, y + (gy - y) * i / count, yaw))
         x, y = gx, gy
-    while abs(_wrap(gyaw - yaw)) > 1e-3:
-        yaw = yaw + max(-turn_per_step, min(turn_per_step, _wrap(gyaw - yaw)))
+    while abs(wrap_angle(gyaw - yaw)) > 1e-3:
+        yaw = yaw + max(-turn_per_step, min(turn_per_step, wrap_angle(gyaw - yaw)))
         poses.append((x, y, yaw))
     return poses
 

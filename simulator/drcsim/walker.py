@@ -27,6 +27,7 @@ from drcsim.gait import (
     plan_poses,
     rotation,
     timeline,
+    wrap_angle,
 )
 from drcsim.models.humanoid import ALL_JOINTS
 from drcsim.scene import TICK_STEPS, Scene
@@ -220,7 +221,7 @@ class Walker:
         pos, _ = self.client.getBasePositionAndOrientation(self.scene.robot)
         gx, gy, gyaw = self.goal
         off = math.hypot(gx - pos[0], gy - pos[1])
-        yaw_off = abs((gyaw - self._yaw() + math.pi) % (2 * math.pi) - math.pi)
+        yaw_off = abs(wrap_angle(gyaw - self._yaw()))
         if off <= POSITION_TOLERANCE and yaw_off <= YAW_TOLERANCE:
             self.status, self.goal = "done", None
         elif off < self.start_distance - 0.1 or self.replans < MAX_REPLANS:
@@ -238,7 +239,7 @@ class Walker:
         )
         s = tau * tau * (3 - 2 * tau)
         a, b = swing.start, swing.end
-        dyaw = (b.yaw - a.yaw + math.pi) % (2 * math.pi) - math.pi
+        dyaw = wrap_angle(b.yaw - a.yaw)
         lift = self.params.step_height * math.sin(math.pi * tau)
         return Foothold(
             a.x + (b.x - a.x) * s,
