@@ -18,8 +18,10 @@ from cloudsim.auth.ssh_keys import parse_public_key
 from cloudsim.errors import InvalidInput
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.access import team_keys
-from cloudsim.models import Constellation, ConstellationState, Job, Role, SshKey, User
+from cloudsim.launched_constellations.service import launch
+from cloudsim.models import Constellation, Job, Role, SshKey, User
 from cloudsim.people.service import update_user
+from tests.competition.support import ready_constellation
 from tests.conftest import csrf_token, log_in, make_user, token_for
 
 
@@ -79,15 +81,12 @@ def test_weak_or_malformed_keys_are_refused_with_the_reason(text: str, reason: s
 
 
 def _ready_vrc(team_id: int) -> Constellation:
-    constellation = Constellation(
-        name=f"keys{team_id}",
-        kind="vrc",
-        provider="local",
-        team_id=team_id,
-        state=ConstellationState.READY,
+    """Launch one (no worker takes the job) and mark it ready, as its launch would."""
+    constellation, _ = launch(
+        SYSTEM, name=f"keys{team_id}", kind="vrc", provider="local", team_id=team_id
     )
-    db.session.add(constellation)
     db.session.commit()
+    ready_constellation(constellation.id)
     return constellation
 
 
