@@ -56,6 +56,9 @@ def test_pages_that_show_a_secret_once_are_never_stored(
     token = client.post("/account/tokens", data={"name": "laptop"})
     assert 'id="new-token"' in token.get_data(as_text=True)
     _assert_hardened(token, "new token page")
+    key = client.post("/account/ssh-keys", data={"generate": "1"})
+    assert 'id="new-private-key"' in key.get_data(as_text=True)
+    _assert_hardened(key, "generated SSH key page")
     headers = token_for(people["officer"])  # type: ignore[arg-type]
     api = app.test_client()
     _assert_hardened(api.post("/api/v1/tokens", json={"name": "x"}, headers=headers), "API token")
@@ -64,6 +67,9 @@ def test_pages_that_show_a_secret_once_are_never_stored(
     )
     assert made.json["generated_password"]
     _assert_hardened(made, "API generated password")
+    key = api.post("/api/v1/me/ssh-keys", json={"generate": True}, headers=headers)
+    assert "PRIVATE KEY" in key.json["private_key"]
+    _assert_hardened(key, "API generated SSH key")
 
 
 def test_templates_hold_no_inline_script_or_style() -> None:
