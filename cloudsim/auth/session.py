@@ -15,6 +15,7 @@ from flask import Flask, current_app, redirect, request, session, url_for
 from flask.typing import ResponseReturnValue
 from flask_login import login_user, logout_user
 from sqlalchemy import delete, select
+from sqlalchemy.orm import joinedload
 
 from cloudsim.extensions import db, login_manager
 from cloudsim.models import LoginSession, User, utcnow
@@ -67,7 +68,12 @@ def init_login(app: Flask) -> None:
     def load_user(key: str) -> User | None:
         if not isinstance(key, str) or not key:
             return None
-        row = db.session.scalar(select(LoginSession).where(LoginSession.key_hash == _digest(key)))
+        # Every page asks: one query for the session and its user.
+        row = db.session.scalar(
+            select(LoginSession)
+            .where(LoginSession.key_hash == _digest(key))
+            .options(joinedload(LoginSession.user))
+        )
         if row is None or not row.user.active:
             return None
         if row.created_at + _lifetime() < utcnow():
