@@ -113,8 +113,9 @@ def seed(env: dict[str, str]) -> dict[str, str]:
             )
             for i in range(1000)
         )
-        db.session.commit()
-        return {"Authorization": f"Bearer {issue_token(admin, 'bench').plaintext}"}
+        token = issue_token(admin, "bench").plaintext
+        db.session.commit()  # services only flush: the seeding is the boundary here
+        return {"Authorization": f"Bearer {token}"}
 
 
 def log_in(base: str, email: str) -> requests.Session:
