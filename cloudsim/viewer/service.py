@@ -108,12 +108,14 @@ def _local_logs(run: Run, config: Config) -> Path:
         with contextlib.suppress(FileNotFoundError):
             os.utime(folder)  # recently viewed: the last folder to prune
         return folder
+    artifacts = {name: artifact_for(run, name) for name in missing}
+    for name, artifact in artifacts.items():
+        if artifact is None:  # refused before anything is written: no empty folder per request
+            raise Conflict(f"run {run.id} has no {name} to replay")
     store = LogStore(config)
     folder.mkdir(parents=True, exist_ok=True)
-    for name in missing:
-        artifact = artifact_for(run, name)
-        if artifact is None:
-            raise Conflict(f"run {run.id} has no {name} to replay")
+    for name, artifact in artifacts.items():
+        assert artifact is not None
         partial = folder / f".{name}.{os.getpid()}.{threading.get_ident()}.part"
         with partial.open("wb") as out:
             for chunk in store.stream(artifact.location):

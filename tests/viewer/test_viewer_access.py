@@ -20,6 +20,7 @@ from cloudsim.models import Job, Role, RunState, User
 from cloudsim.people import service
 from cloudsim.viewer import service as viewer_service
 from cloudsim.viewer.live import _key, redis_client, relay_job, store_frame
+from tests.competition.support import finished_run, open_task
 from tests.conftest import log_in, make_user, running_app, token_for
 from tests.viewer.conftest import store_run
 
@@ -182,3 +183,14 @@ def test_a_replay_closed_by_another_request_meanwhile_is_opened_again(
     monkeypatch.setattr(viewer_service._Replays, "get", get_then_evicted)
     answer = _client(app, user_a).get(f"/runs/{mine.id}/view/frames?start=2&seconds=1")
     assert raced and answer.status_code == 200 and len(answer.get_json()["frames"]) == 33
+
+
+def test_a_run_without_a_state_log_is_refused_and_leaves_no_cache_behind(
+    app: Flask, people: dict[str, User | None], tmp_path: Path
+) -> None:
+    user_a = people["user_a"]
+    assert user_a is not None and user_a.team_id is not None
+    run = finished_run(open_task(user_a.team_id), None, tmp_path)  # its score log only
+    answer = _client(app, user_a).get(f"/runs/{run.id}/view/frames")
+    assert answer.status_code == 409 and "no meta.json to replay" in answer.get_data(as_text=True)
+    assert not (app.config["CLOUDSIM"].instance_dir / "viewer" / f"run-{run.id}").exists()
