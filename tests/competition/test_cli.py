@@ -61,6 +61,10 @@ def test_tasks_schedule_and_leaderboard_from_the_command_line(
     assert refused.exit_code == 1 and "window" in refused.output
     board = json.loads(run("leaderboard", "--json").output)
     assert [s["rank"] for s in board] == [1, 1] and all(s["checkpoints"] == 0 for s in board)
+    deleted = run("task", "delete", str(tasks[0]["id"]))
+    assert deleted.exit_code == 0 and f"deleted task {tasks[0]['id']}" in deleted.output
+    left = json.loads(run("task", "list", "--json").output)
+    assert [t["id"] for t in left] == [tasks[1]["id"]]
 
 
 def test_the_demo_schedules_its_task_once_and_starts_its_job(app: Flask, team_a: Team) -> None:
