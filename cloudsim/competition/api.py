@@ -144,7 +144,7 @@ class Tasks(MethodView):
             uplink_bits=data["uplink_bits"],
             downlink_bits=data["downlink_bits"],
             order=data["order"],
-            time_zone=data["time_zone"].strip(),
+            time_zone=data["time_zone"],
         )
         return schedule.schedule(caller(), spec, data["team_ids"])
 

@@ -92,7 +92,7 @@ def in_zone(value: datetime, zone_name: str) -> datetime:
 
 
 def check_spec(spec: TaskSpec) -> TaskSpec:
-    """Return the spec with its name tidied, or raise InvalidInput naming the first problem."""
+    """Return the spec with its name and zone tidied, or raise InvalidInput naming a problem."""
     name = " ".join(spec.name.split())
     if not name or len(name) > NAME_MAX:
         raise InvalidInput(f"task name must be 1-{NAME_MAX} characters")
@@ -111,7 +111,7 @@ def check_spec(spec: TaskSpec) -> TaskSpec:
             raise InvalidInput(f"{label} cap must be 0-{MAX_BITS} bits")
     if not -10_000 <= spec.order <= 10_000:
         raise InvalidInput("order must be between -10000 and 10000")
-    return replace(spec, name=name)
+    return replace(spec, name=name, time_zone=spec.time_zone.strip())
 
 
 def _teams(team_ids: list[int] | None) -> list[Team]:

@@ -70,7 +70,7 @@ def schedule_task() -> ResponseReturnValue:
                 uplink_bits=form.uplink_bits.data or 0,
                 downlink_bits=form.downlink_bits.data or 0,
                 order=form.order.data or 0,
-                time_zone=(form.time_zone.data or "").strip(),
+                time_zone=form.time_zone.data or "",
             )
             created = schedule.schedule(current_user, spec, form.team_ids())
         except CloudSimError as exc:

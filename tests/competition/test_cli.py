@@ -40,12 +40,13 @@ def test_tasks_schedule_and_leaderboard_from_the_command_line(
     added = run(
         "task", "add", "--name", "Walk 1", "--world", "vrc_task_2", "--config", "2",
         "--start", "2030-06-17 09:00", "--stop", "2030-06-17 12:00",
-        "--time-zone", "America/Los_Angeles", "--uplink-bits", "115200", "--json",
+        "--time-zone", " America/Los_Angeles ", "--uplink-bits", "115200", "--json",
     )  # fmt: skip
     assert added.exit_code == 0, added.output
     tasks = json.loads(added.output)
     assert {t["team"] for t in tasks} == {"Team Seven", "Team Eight"}
     assert tasks[0]["window_start"] == "2030-06-17T16:00:00+00:00"
+    assert tasks[0]["time_zone"] == "America/Los_Angeles"  # tidied as the pages and API do
     exported = run("schedule", "export")
     assert "time_zone: America/Los_Angeles" in exported.output
     assert "start: 2030-06-17 09:00" in exported.output and "teams:" not in exported.output
