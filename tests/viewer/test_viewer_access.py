@@ -66,6 +66,21 @@ def test_bad_replay_ranges_are_refused(
     assert response.status_code == 400
 
 
+def test_extreme_but_valid_replay_ranges_answer_no_frames(
+    app: Flask, people: dict[str, User | None], run_logs: Path
+) -> None:
+    user_a = people["user_a"]
+    assert user_a is not None and user_a.team is not None
+    run = store_run(user_a.team, run_logs)
+    client, token = _client(app, user_a), token_for(user_a)
+    for query in ("start=1e308&seconds=30", "seconds=1e-300", "start=8.99&seconds=0.000001"):
+        for answer in (
+            client.get(f"/runs/{run.id}/view/frames?{query}"),
+            client.get(f"/api/v1/runs/{run.id}/view/frames?{query}", headers=token),
+        ):
+            assert answer.status_code == 200 and answer.get_json()["frames"] == [], query
+
+
 def test_a_team_gets_no_live_view_of_its_own_running_run(
     app: Flask, people: dict[str, User | None], run_logs: Path
 ) -> None:
