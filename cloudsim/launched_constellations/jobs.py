@@ -15,12 +15,13 @@ from flask import current_app
 from libcloud.compute.base import Node, NodeAuthSSHKey
 from libcloud.compute.types import NodeState
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.launched_constellations import lifecycle
-from cloudsim.launched_constellations.access import team_keys
+from cloudsim.launched_constellations.access import TEAM_KINDS, team_keys
 from cloudsim.launched_constellations.connect import (
     machine_host_keys,
     record_routes,
@@ -66,6 +67,7 @@ def launch_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     config: Config = current_app.config["CLOUDSIM"]
     kind = launched_kind(constellation)
     lifecycle.launching(constellation)
+    deployed = _team_access(constellation)  # the install below deploys these, or newer ones
     try:
         _launch(ctx, constellation, kind, config)
     except Exception as exc:
@@ -76,6 +78,16 @@ def launch_constellation(ctx: JobContext, job: ConstellationJob) -> None:
         raise
     lifecycle.ready(constellation)
     ctx.stage("ready", 100)
+    ctx.checkpoint()  # ready first: a change from now on starts its own push
+    if constellation.kind in TEAM_KINDS and _team_access(constellation) != deployed:
+        # changed while launching, when no push runs: the field computers have the old ones
+        ctx.log("the team's keys or sudo changed during the launch: pushing them again")
+        lifecycle.start_refresh_access(SYSTEM, constellation)
+
+
+def _team_access(constellation: Constellation) -> tuple[tuple[str, ...], bool]:
+    """Return what the field computers' team account gets: its keys, and sudo or not."""
+    return team_keys(constellation.team_id), constellation.team_sudo
 
 
 def _launch(
