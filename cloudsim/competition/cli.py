@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from cloudsim.auth.policy import SYSTEM
-from cloudsim.cli import app_context, emit, reports_errors
+from cloudsim.cli import ID, app_context, emit, reports_errors
 from cloudsim.competition import runs as run_service
 from cloudsim.competition import schedule, season
 from cloudsim.competition.worlds import worlds
@@ -123,7 +123,7 @@ def list_tasks(as_json: bool) -> None:
 
 
 @task.command("delete")
-@click.argument("task_id", type=int)
+@click.argument("task_id", type=ID)
 @reports_errors
 def delete(task_id: int) -> None:
     """Delete a task nobody has run."""
@@ -162,7 +162,7 @@ def run() -> None:
 
 
 @run.command("start")
-@click.argument("task_id", type=int)
+@click.argument("task_id", type=ID)
 @click.option("--json", "as_json", is_flag=True)
 @reports_errors
 def start(task_id: int, as_json: bool) -> None:
@@ -173,7 +173,7 @@ def start(task_id: int, as_json: bool) -> None:
 
 
 @run.command("stop")
-@click.argument("run_id", type=int)
+@click.argument("run_id", type=ID)
 @reports_errors
 def stop(run_id: int) -> None:
     """Stop a live run."""
@@ -183,7 +183,7 @@ def stop(run_id: int) -> None:
 
 
 @run.command("show")
-@click.argument("run_id", type=int)
+@click.argument("run_id", type=ID)
 @click.option("--json", "as_json", is_flag=True)
 @reports_errors
 def show(run_id: int, as_json: bool) -> None:

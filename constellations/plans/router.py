@@ -10,6 +10,8 @@ import ipaddress
 import shlex
 from collections.abc import Callable, Sequence
 
+from csrouter.config import DEFAULT_CONFIG_PATH, DOWNLINK_QUEUE, UPLINK_QUEUE
+
 from constellations.plans.base import Action, PlanContext, PlanItem, VpnMaterial
 from constellations.plans.common import match
 from constellations.plans.software import install_wheelhouse
@@ -38,10 +40,9 @@ VPN_MANAGEMENT_SOCKET = f"/run/openvpn-server/{VPN_INSTANCE}-management.sock"
 VPN_STATE_DIR = "/var/lib/cloudsim/vpn"  # written by OpenVPN as nobody: the address pool
 VPN_DISCONNECT_COMMAND = "/usr/local/sbin/cloudsim-vpn-disconnect"
 CSROUTER_VENV = "/opt/csrouter"
-CSROUTER_CONFIG = "/etc/cloudsim/router.json"
+CSROUTER_CONFIG = DEFAULT_CONFIG_PATH
 CSROUTER_COMMAND = "/usr/local/sbin/csrouter"
 CSROUTER_SERVICE = "csrouter"
-UPLINK_QUEUE, DOWNLINK_QUEUE = 0, 1
 SYSTEMD_DIR = "/etc/systemd/system"
 
 

@@ -16,6 +16,7 @@ DEFAULT_SOCKET = "/run/csrouter/control.sock"
 DEFAULT_BANDWIDTH_LOG = "/var/log/cloudsim/bandwidth.log"
 DEFAULT_STATE_FILE = "/var/lib/cloudsim/router/state.json"
 DEFAULT_LATENCY_MS = 250
+UPLINK_QUEUE, DOWNLINK_QUEUE = 0, 1  # the NFQUEUE numbers CloudSim's router plan uses
 MAX_LATENCY_MS = 2000
 _DEVICE = re.compile(r"^[A-Za-z0-9_.-]{1,15}$")
 
@@ -27,8 +28,8 @@ class RouterConfig:
     lan_subnet: str
     vpn_network: str = "10.8.0.0/24"
     vpn_device: str = "tun-ocu"
-    uplink_queue: int = 0
-    downlink_queue: int = 1
+    uplink_queue: int = UPLINK_QUEUE
+    downlink_queue: int = DOWNLINK_QUEUE
     socket: str = DEFAULT_SOCKET
     bandwidth_log: str = DEFAULT_BANDWIDTH_LOG
     state_file: str = DEFAULT_STATE_FILE

@@ -67,7 +67,7 @@ def test_the_bandwidth_log_restarts_and_keeps_the_previous_run(tmp_path: Path) -
     assert [json.loads(line)["run"] for line in lines] == [2, 2]
 
 
-def test_router_config_defaults_match_the_plan() -> None:
+def test_router_config_defaults_are_the_documented_ones() -> None:
     config = RouterConfig(lan_subnet="10.0.0.0/24")
     assert (config.uplink_queue, config.downlink_queue, config.default_latency_ms) == (0, 1, 250)
 

@@ -66,6 +66,9 @@ def test_tasks_schedule_and_leaderboard_from_the_command_line(
     assert deleted.exit_code == 0 and f"deleted task {tasks[0]['id']}" in deleted.output
     left = json.loads(run("task", "list", "--json").output)
     assert [t["id"] for t in left] == [tasks[1]["id"]]
+    for command in (("task", "delete"), ("run", "start"), ("run", "stop"), ("run", "show")):
+        huge = run(*command, "99999999999")  # past PostgreSQL's integer: click refuses it
+        assert huge.exit_code == 2 and "Traceback" not in huge.output, command
 
 
 def test_the_demo_schedules_its_task_once_and_starts_its_job(app: Flask, team_a: Team) -> None:
