@@ -10,6 +10,7 @@ from sqlalchemy.orm import selectinload
 
 from cloudsim.extensions import db
 from cloudsim.jobs.service import visible_jobs
+from cloudsim.launched_constellations.service import visible_constellations
 from cloudsim.models import Constellation, Role, Run, Task, Team, User, utcnow
 from cloudsim.people.service import visible_teams
 
@@ -48,11 +49,10 @@ def index() -> ResponseReturnValue:
     return render_template(
         "dashboard/user.html",
         team=team,
-        constellations=db.session.scalars(
-            select(Constellation).where(Constellation.team_id == current_user.team_id)
-        ).all(),
+        constellations=db.session.scalars(visible_constellations(current_user)).all(),
         runs=db.session.scalars(
             select(Run)
+            .options(selectinload(Run.task))
             .where(Run.team_id == current_user.team_id)
             .order_by(Run.started_at.desc())
             .limit(RECENT)

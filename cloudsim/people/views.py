@@ -5,12 +5,14 @@ from __future__ import annotations
 from flask import Blueprint, flash, redirect, render_template, url_for
 from flask.typing import ResponseReturnValue
 from flask_login import current_user, login_required
+from sqlalchemy import select
+from sqlalchemy.orm import selectinload
 
 from cloudsim.auth.forms import ConfirmForm
 from cloudsim.auth.policy import role_required
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
-from cloudsim.models import Role
+from cloudsim.models import Constellation, Role
 from cloudsim.people import service
 from cloudsim.people.forms import TeamForm, UserForm
 
@@ -54,6 +56,12 @@ def team(team_id: int) -> ResponseReturnValue:
         "people/team.html",
         team=team,
         members=service.visible_users(current_user, team.id),
+        constellations=db.session.scalars(
+            select(Constellation)
+            .where(Constellation.team_id == team.id)
+            .options(selectinload(Constellation.machines))
+            .order_by(Constellation.id.desc())
+        ).all(),
         form=TeamForm(name=team.name),
         confirm=ConfirmForm(),
     )
