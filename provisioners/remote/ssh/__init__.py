@@ -1,5 +1,6 @@
 """Reach machines over SSH: run commands, move files, many machines at once."""
 
+from provisioners.remote.ssh.cache import CacheStats, ConnectionCache, process_cache
 from provisioners.remote.ssh.connections import ConnectPolicy
 from provisioners.remote.ssh.errors import (
     CommandFailed,
@@ -16,11 +17,13 @@ from provisioners.remote.ssh.result import CommandResult, Transfer
 from provisioners.remote.ssh.target import Route, SSHTarget, load_private_key
 
 __all__ = [
+    "CacheStats",
     "CommandFailed",
     "CommandResult",
     "CommandTimeout",
     "ConnectError",
     "ConnectPolicy",
+    "ConnectionCache",
     "GroupError",
     "HostKeyMismatch",
     "HostKeyStore",
@@ -34,4 +37,5 @@ __all__ = [
     "Transfer",
     "fingerprint",
     "load_private_key",
+    "process_cache",
 ]

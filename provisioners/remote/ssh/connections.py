@@ -7,6 +7,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import fabric
 import paramiko
@@ -15,6 +16,9 @@ from provisioners.remote.ssh.errors import ConnectError
 from provisioners.remote.ssh.hostkeys import HostKeyStore, TrustOnFirstUse
 from provisioners.remote.ssh.proxy import ArgvProxyCommand
 from provisioners.remote.ssh.target import SSHTarget, load_private_key
+
+if TYPE_CHECKING:
+    from provisioners.remote.ssh.cache import ConnectionCache
 
 # how long to wait for paramiko's reader thread to stop after a connection is closed
 _READER_STOP_SECONDS = 5.0
@@ -37,17 +41,23 @@ class ConnectPolicy:
 
 
 class ConnectionPool:
-    """Keep one open connection per machine name; open it on demand with backoff."""
+    """Keep one open connection per machine name; open it on demand with backoff.
+
+    With a `shared` cache the connections are the cache's: they outlive this pool and are
+    handed to every pool of the process that reaches the same machine the same way.
+    """
 
     def __init__(
         self,
         host_keys: HostKeyStore,
         policy: ConnectPolicy,
         log: Callable[[str, str], None],
+        shared: ConnectionCache | None = None,
     ) -> None:
         self._host_keys = host_keys
         self._policy = policy
         self._log = log
+        self._shared = shared
         self._connections: dict[str, tuple[SSHTarget, fabric.Connection]] = {}
         self._keys: dict[str, paramiko.PKey] = {}
         self._locks: dict[str, threading.Lock] = {}
@@ -61,11 +71,17 @@ class ConnectionPool:
 
     def sftp_lock(self, machine: SSHTarget) -> threading.Lock:
         """Return the lock that serialises transfers on one machine's SFTP session."""
+        if self._shared is not None:
+            return self._shared.sftp_lock(machine)
         with self._pool_lock:
             return self._sftp_locks.setdefault(machine.name, threading.Lock())
 
     def get(self, machine: SSHTarget) -> fabric.Connection:
         """Return an open connection to the machine, connecting (with retries) if needed."""
+        if self._shared is not None:
+            return self._shared.get(
+                machine, self._host_keys, lambda: self._connect_with_retries(machine)
+            )
         with self.machine_lock(machine):
             cached = self._connections.get(machine.name)
             if cached is not None:
@@ -79,29 +95,26 @@ class ConnectionPool:
 
     def discard(self, machine: SSHTarget) -> None:
         """Close a machine's connection, e.g. after its transport broke."""
+        if self._shared is not None:
+            self._shared.evict(machine)
+            return
         with self.machine_lock(machine):
             self._drop(machine.name)
 
     def close_all(self) -> None:
-        """Close every connection (those through a jump host first)."""
+        """Close every connection this pool owns (those through a jump host first)."""
         with self._pool_lock:
             names = list(self._connections)
         # a jump host's connection carries others: close the carried ones first
-        names.sort(key=lambda name: _jump_depth(self._connections[name][0]), reverse=True)
+        names.sort(key=lambda name: jump_depth(self._connections[name][0]), reverse=True)
         for name in names:
             with self._locks[name]:
                 self._drop(name)
 
     def _drop(self, name: str) -> None:
         cached = self._connections.pop(name, None)
-        if cached is None:
-            return
-        transport = cached[1].client.get_transport()
-        cached[1].close()
-        if transport is not None:
-            transport.join(_READER_STOP_SECONDS)  # the reader thread must be done with the proxy
-            if isinstance(transport.sock, ArgvProxyCommand):
-                transport.sock.release()
+        if cached is not None:
+            close_connection(cached[1])
 
     def _connect_with_retries(self, machine: SSHTarget) -> fabric.Connection:
         deadline = time.monotonic() + self._policy.deadline
@@ -194,7 +207,18 @@ class ConnectionPool:
         return key
 
 
-def _jump_depth(machine: SSHTarget) -> int:
+def close_connection(connection: fabric.Connection) -> None:
+    """Close a connection, wait for its reader thread, and release its proxy's pipes."""
+    transport = connection.client.get_transport()
+    connection.close()
+    if transport is not None:
+        transport.join(_READER_STOP_SECONDS)  # the reader thread must be done with the proxy
+        if isinstance(transport.sock, ArgvProxyCommand):
+            transport.sock.release()
+
+
+def jump_depth(machine: SSHTarget) -> int:
+    """Return how many jump machines stand between the controller and this one."""
     depth = 0
     while machine.jump is not None:
         machine, depth = machine.jump, depth + 1

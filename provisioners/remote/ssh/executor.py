@@ -17,6 +17,7 @@ from typing import TypeVar
 import fabric
 import paramiko
 
+from provisioners.remote.ssh.cache import ConnectionCache
 from provisioners.remote.ssh.connections import ConnectionPool, ConnectPolicy
 from provisioners.remote.ssh.errors import CommandFailed, CommandTimeout, GroupError, SSHError
 from provisioners.remote.ssh.hostkeys import HostKeyStore
@@ -52,12 +53,15 @@ class SSHExecutor:
         connect_policy: ConnectPolicy | None = None,
         default_timeout: float = 600.0,
         max_parallel: int = 16,
+        connections: ConnectionCache | None = None,
     ) -> None:
         self._sink = log_sink or _no_log
         self._mask = SecretMasker(secrets)
         self._default_timeout = default_timeout
         self._max_parallel = max_parallel
-        self._pool = ConnectionPool(host_keys, connect_policy or ConnectPolicy(), self.log)
+        self._policy = connect_policy or ConnectPolicy()
+        # with `connections`, connections come from (and stay in) that cache after close()
+        self._pool = ConnectionPool(host_keys, self._policy, self.log, shared=connections)
 
     def add_secret(self, secret: str) -> None:
         """Mask one more secret in everything logged from now on."""
@@ -206,13 +210,15 @@ class SSHExecutor:
         self._sink(machine_name, self._mask(line))
 
     def _open_session(self, machine: SSHTarget) -> paramiko.Channel:
+        # a machine that stopped answering must not hold a channel open for paramiko's hour
+        timeout = self._policy.attempt_timeout
         try:
-            return _session(self._pool.get(machine))
+            return _session(self._pool.get(machine), timeout)
         except (OSError, EOFError, paramiko.SSHException) as exc:
-            # a cached connection whose machine rebooted: reconnect once
-            self.log(machine.name, f"connection lost ({exc}), reconnecting")
+            # a cached connection whose machine rebooted or went silent: reconnect once
+            self.log(machine.name, f"connection lost ({exc or type(exc).__name__}), reconnecting")
             self._pool.discard(machine)
-            return _session(self._pool.get(machine))
+            return _session(self._pool.get(machine), timeout)
 
     def _collect(
         self,
@@ -250,11 +256,11 @@ class SSHExecutor:
         )
 
 
-def _session(connection: fabric.Connection) -> paramiko.Channel:
+def _session(connection: fabric.Connection, timeout: float) -> paramiko.Channel:
     transport = connection.client.get_transport()
     if transport is None:
         raise paramiko.SSHException("connection has no transport")
-    return transport.open_session()
+    return transport.open_session(timeout=timeout)
 
 
 def _chunks(source: Path | str | bytes) -> Iterable[bytes]:
