@@ -85,6 +85,18 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_LOCAL_PUBLIC_CIDR": Setting(
         "198.18.0.0/24", "The local provider's shared 'public' network"
     ),
+    "CLOUDSIM_LOCAL_MAX_HOSTS": Setting(
+        "0", "Most hosts the local provider runs at once; 0 = as many as the machine allows"
+    ),
+    "CLOUDSIM_LOCAL_HOST_MEMORY_MB": Setting(
+        "160", "Memory the local provider counts per host (an average vrc host) in its capacity"
+    ),
+    "CLOUDSIM_LOCAL_MEMORY_RESERVE_MB": Setting(
+        "2048", "Memory the local provider leaves to the controller when counting its capacity"
+    ),
+    "CLOUDSIM_VERIFY_RETRY_SECONDS": Setting(
+        "120", "How long verification retries failed checks (with backoff) before it gives up"
+    ),
     "CLOUDSIM_MACHINE_PYTHON": Setting(
         "/usr/bin/python3",
         "A Python like the machines' (Debian 12's), used to build the wheels they install",
@@ -154,6 +166,10 @@ class Config:
     local_prefix: str
     local_subnet_pool: str
     local_public_cidr: str
+    local_max_hosts: int
+    local_host_memory_mb: int
+    local_memory_reserve_mb: int
+    verify_retry_seconds: int
     machine_python: str
     argon2_time_cost: int
     argon2_memory_kib: int
@@ -241,6 +257,10 @@ class Config:
             local_prefix=get("CLOUDSIM_LOCAL_PREFIX"),
             local_subnet_pool=get("CLOUDSIM_LOCAL_SUBNET_POOL"),
             local_public_cidr=get("CLOUDSIM_LOCAL_PUBLIC_CIDR"),
+            local_max_hosts=number("CLOUDSIM_LOCAL_MAX_HOSTS"),
+            local_host_memory_mb=number("CLOUDSIM_LOCAL_HOST_MEMORY_MB"),
+            local_memory_reserve_mb=number("CLOUDSIM_LOCAL_MEMORY_RESERVE_MB"),
+            verify_retry_seconds=number("CLOUDSIM_VERIFY_RETRY_SECONDS"),
             machine_python=get("CLOUDSIM_MACHINE_PYTHON"),
             argon2_time_cost=number("CLOUDSIM_ARGON2_TIME_COST"),
             argon2_memory_kib=number("CLOUDSIM_ARGON2_MEMORY_KIB"),

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 from typing import Any
 
+from flask import current_app
 from flask.views import MethodView
 
 from cloudsim.api.common import Blueprint, SelectPage, caller
 from cloudsim.jobs.schemas import JobSchema
 from cloudsim.launched_constellations import service, vpn
+from cloudsim.launched_constellations.capacity import visible_room
 from cloudsim.launched_constellations.schemas import (
+    CapacityQuerySchema,
+    CapacitySchema,
     ConstellationSchema,
     ConstellationUpdateSchema,
     LaunchedSchema,
@@ -35,6 +39,28 @@ class Constellations(MethodView):
         """Launch a constellation (admins); follow the returned job."""
         constellation, job = service.launch(caller(), **data)
         return {"constellation": constellation, "job": job}
+
+
+@blp.route("/constellations/capacity")
+class Capacity(MethodView):
+    @blp.arguments(CapacityQuerySchema, location="query")
+    @blp.response(200, CapacitySchema)
+    def get(self, query: dict[str, Any]) -> Any:
+        """Say how many more machines (and constellations of each kind) a provider can take
+        (officers and admins); a launch beyond it is refused with 409."""
+        found = visible_room(caller(), query["provider"], current_app.config["CLOUDSIM"])
+        if found is None:
+            return {"provider": query["provider"], "known": False, "kinds": {}}
+        capacity = found.capacity
+        return {
+            "provider": found.provider,
+            "known": True,
+            "hosts": capacity.hosts,
+            "networks": capacity.networks,
+            "public_addresses": capacity.public,
+            "limited_by": capacity.limited_by,
+            "kinds": found.kinds,
+        }
 
 
 @blp.route("/constellations/<int:ref>")

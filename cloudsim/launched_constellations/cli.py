@@ -6,12 +6,14 @@ import sys
 import time
 
 import click
+from flask import current_app
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, commit, emit, reports_errors
 from cloudsim.extensions import db
 from cloudsim.jobs.service import run_here, workers_alive
 from cloudsim.launched_constellations import service
+from cloudsim.launched_constellations.capacity import describe, room
 from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair
 from cloudsim.launched_constellations.reconcile import destroy_orphans, find_orphans
@@ -132,6 +134,29 @@ def launch(
             SYSTEM, name=name, kind=kind, provider=provider, team_id=team_id
         )
         _follow(created, job, "launch", wait, as_json)
+        if not as_json:
+            click.echo(describe(room(provider, current_app.config["CLOUDSIM"])))
+
+
+@constellation.command("capacity")
+@click.option("--provider", default="local", show_default=True, type=click.Choice(PROVIDERS))
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def capacity(provider: str, as_json: bool) -> None:
+    """Say how many more machines (and constellations of each kind) a provider can take."""
+    with app_context():
+        found = room(provider, current_app.config["CLOUDSIM"])
+        data: dict[str, object] = {"provider": provider, "known": found is not None}
+        if found is not None:
+            data |= {
+                "hosts": found.capacity.hosts,
+                "networks": found.capacity.networks,
+                "public_addresses": found.capacity.public,
+                "limited_by": found.capacity.limited_by,
+                "bounds": found.capacity.bounds,
+                "kinds": found.kinds,
+            }
+        emit(data, as_json, describe(found))
 
 
 @constellation.command("list")

@@ -136,6 +136,7 @@ def _launch(
             reach,
             driver.ex_public_proxy_command,
             driver.ex_public_command,
+            config.verify_retry_seconds,
         )
 
 

@@ -51,3 +51,21 @@ class LaunchedSchema(Schema):
 
 class VpnBundleQuerySchema(Schema):
     user_id = Id(metadata={"description": "Officers: whose bundle (default: yours)"})
+
+
+class CapacityQuerySchema(Schema):
+    provider = fields.Str(load_default="local", validate=validate.Length(min=1, max=32))
+
+
+class CapacitySchema(Schema):
+    provider = fields.Str()
+    known = fields.Bool(metadata={"description": "False: the provider does not say"})
+    hosts = fields.Int(allow_none=True, metadata={"description": "More machines it can take"})
+    networks = fields.Int(allow_none=True, metadata={"description": "More private networks"})
+    public_addresses = fields.Int(allow_none=True, metadata={"description": "More public ones"})
+    limited_by = fields.Str(allow_none=True, metadata={"description": "The scarcest resource"})
+    kinds = fields.Dict(
+        keys=fields.Str(),
+        values=fields.Int(),
+        metadata={"description": "How many more constellations of each kind fit"},
+    )

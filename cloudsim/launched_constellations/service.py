@@ -6,6 +6,7 @@ import io
 import re
 import zipfile
 
+from flask import current_app
 from sqlalchemy import Select, select
 from sqlalchemy.orm import selectinload
 
@@ -15,6 +16,7 @@ from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import lifecycle
 from cloudsim.launched_constellations.access import TEAM_KINDS, refresh_team_access
+from cloudsim.launched_constellations.capacity import require_room
 from cloudsim.launched_constellations.keys import constellation_keypair, instance_admin_password
 from cloudsim.models import Constellation, ConstellationState, Job, Machine, Role, Team
 from cloudsim.providers.service import PROVIDERS
@@ -99,6 +101,7 @@ def launch(
     )
     if db.session.scalar(live):
         raise Conflict(f"a constellation named {name!r} already exists")
+    require_room(provider, definition, current_app.config["CLOUDSIM"])
     constellation = Constellation(
         name=name,
         kind=kind,

@@ -6,8 +6,10 @@ import json
 import shlex
 import socket
 import subprocess
+import time
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, TypeVar
 
 from cloudsim.errors import CloudSimError
 from cloudsim.jobs.runner import JobContext
@@ -22,6 +24,44 @@ SELFTEST = "/opt/drcsim/bin/drcsim selftest --seconds 2 --min-rtf 0 --json"
 
 # the provider's way to reach ip:port from "the internet" (an argv), None: from here
 PublicProbe = Callable[[str, int], list[str] | None]
+T = TypeVar("T")
+
+
+@dataclass
+class Retry:
+    """Retry failed checks with backoff, until a deadline the whole verification shares.
+
+    Load alone (a busy machine, thirty launches at once) makes a port answer late or an SSH
+    handshake time out: a check that fails is tried again, each retry logged, and only one
+    still failing when the bounded time is up fails the verification.
+    """
+
+    seconds: float
+    log: Callable[[str], None]
+    first_wait: float = 1.0
+    longest_wait: float = 10.0
+    deadline: float | None = None  # starts at the first retry
+
+    def until(self, name: str, attempt: Callable[[], tuple[bool, T]]) -> T:
+        """Return attempt's value once it reports success, or its last one when time is up."""
+        ok, value = attempt()
+        tries, wait = 1, self.first_wait
+        while not ok:
+            now = time.monotonic()
+            if self.deadline is None:
+                self.deadline = now + self.seconds
+            left = self.deadline - now
+            if left <= 0:
+                self.log(f"{name}: still failing after {tries} tries; giving up")
+                return value
+            pause = min(wait, left)
+            self.log(f"{name}: failed (try {tries}), retrying in {pause:.0f} s ({left:.0f} s left)")
+            time.sleep(pause)
+            tries, wait = tries + 1, min(wait * 2, self.longest_wait)
+            ok, value = attempt()
+        if tries > 1:
+            self.log(f"{name}: passed on try {tries}")
+        return value
 
 
 class VerificationFailed(CloudSimError):
@@ -36,13 +76,26 @@ def verify_constellation(
     reach: dict[str, SSHTarget],
     public_probe: PublicProbe,
     public_command: PublicCommand,
+    retry_seconds: float,
 ) -> None:
-    """Run every check, store the results per machine, raise listing the failures."""
+    """Run every check (retrying failed ones), store the results per machine, raise listing
+    the failures."""
     results: dict[str, dict[str, Any]] = {m.name: {"checks": []} for m in constellation.machines}
     failures: list[str] = []
+    retry = Retry(retry_seconds, ctx.log)
+
+    def hostname(target: SSHTarget) -> str | Exception:
+        try:
+            return executor.run(target, "hostname", timeout=30).stdout.strip()
+        except Exception as exc:
+            return exc
+
     answers = executor.run_parallel(
         list(reach.values()),
-        lambda t: executor.run(t, "hostname", timeout=30).stdout.strip(),
+        lambda t: retry.until(
+            f"{t.name.rsplit('/', 1)[-1]} answers over SSH",
+            lambda: (not isinstance(answer := hostname(t), Exception), answer),
+        ),
         raise_on_error=False,
     )
     for target_name, answer in answers.items():
@@ -56,12 +109,15 @@ def verify_constellation(
     for check in kind.reachability:
         if check.source == VPN:
             continue  # checked below, through a VPN client of its own
-        if check.source == PUBLIC:
-            connected = _probe_public(public_probe, addresses[check.target], check.port)
-        else:
-            connected = _probe_from(
-                executor, reach[check.source], private[check.target], check.port
-            )
+
+        def probe(check: Reachability = check) -> tuple[bool, bool]:
+            if check.source == PUBLIC:
+                seen = _probe_public(public_probe, addresses[check.target], check.port)
+            else:
+                seen = _probe_from(executor, reach[check.source], private[check.target], check.port)
+            return seen == check.allowed, seen
+
+        connected = retry.until(_name(check), probe)
         owner = check.target if check.source == PUBLIC else check.source
         results[owner]["checks"].append(check_result(check, connected))
         if connected != check.allowed:
@@ -70,7 +126,12 @@ def verify_constellation(
     if routers:
         vpn_rows = [c for c in kind.reachability if c.source == VPN]
         router = reach[routers[0]]
-        for seen in check_vpn(executor, constellation, vpn_rows, router, public_command, ctx):
+
+        def vpn_checks() -> tuple[bool, list[dict[str, Any]]]:
+            seen = check_vpn(executor, constellation, vpn_rows, router, public_command, ctx)
+            return all(row["ok"] is not False for row in seen), seen
+
+        for seen in retry.until("the VPN checks", vpn_checks):
             results[seen["to"]]["checks"].append(seen)
             if not seen["ok"]:
                 failures.append(
@@ -80,7 +141,10 @@ def verify_constellation(
                 )
     for machine in kind.machines:
         if "simulator" in machine.plan:
-            results[machine.name]["simulator"] = _selftest(executor, reach[machine.name])
+            results[machine.name]["simulator"] = retry.until(
+                f"{machine.name}: simulator self-test",
+                _selftest_attempt(executor, reach[machine.name]),
+            )
             if not results[machine.name]["simulator"]["ok"]:
                 failures.append(
                     f"{machine.name}: simulator self-test failed: "
@@ -95,6 +159,11 @@ def verify_constellation(
     ctx.log(f"reachability: {passed} of {total} checks as expected")
     if failures:
         raise VerificationFailed("verification failed: " + "; ".join(failures))
+
+
+def _name(check: Reachability) -> str:
+    expected = "connects" if check.allowed else "is refused"
+    return f"{check.source} -> {check.target}:{check.port} {expected}"
 
 
 def _describe(check: Reachability, connected: bool) -> str:
@@ -134,6 +203,16 @@ def _probe_public(public_probe: PublicProbe, address: str, port: int) -> bool:
     except subprocess.TimeoutExpired:
         return False
     return result.returncode == 0
+
+
+def _selftest_attempt(
+    executor: SSHExecutor, target: SSHTarget
+) -> Callable[[], tuple[bool, dict[str, Any]]]:
+    def attempt() -> tuple[bool, dict[str, Any]]:
+        found = _selftest(executor, target)
+        return bool(found["ok"]), found
+
+    return attempt
 
 
 def _selftest(executor: SSHExecutor, target: SSHTarget) -> dict[str, Any]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from flask import (
     Blueprint,
+    current_app,
     flash,
     jsonify,
     redirect,
@@ -19,6 +20,7 @@ from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.views import job_summary
 from cloudsim.launched_constellations import access, service, vpn
+from cloudsim.launched_constellations.capacity import describe, room
 from cloudsim.launched_constellations.forms import LaunchForm
 from cloudsim.models import Role
 from cloudsim.people.service import visible_teams
@@ -32,9 +34,19 @@ bp = Blueprint("constellations", __name__)
 @bp.route("/constellations")
 @login_required
 def index() -> ResponseReturnValue:
-    constellations = db.session.scalars(service.visible_constellations(current_user)).all()
     form = LaunchForm().offer(visible_teams(current_user))
-    return render_template("constellations/index.html", constellations=constellations, form=form)
+    return _index(form), 200
+
+
+def _index(form: LaunchForm) -> str:
+    """Render the list with the launch form (and, for admins, the local provider's room)."""
+    constellations = db.session.scalars(service.visible_constellations(current_user)).all()
+    local_room = None
+    if current_user.has_role(Role.ADMIN):
+        local_room = describe(room("local", current_app.config["CLOUDSIM"]))
+    return render_template(
+        "constellations/index.html", constellations=constellations, form=form, room=local_room
+    )
 
 
 @bp.route("/constellations", methods=["POST"])
@@ -58,10 +70,7 @@ def launch() -> ResponseReturnValue:
         else:
             flash(f"Launching {constellation.name}.", "info")
             return redirect(url_for("constellations.show", ref=constellation.id))
-    constellations = db.session.scalars(service.visible_constellations(current_user)).all()
-    return render_template(
-        "constellations/index.html", constellations=constellations, form=form
-    ), status
+    return _index(form), status
 
 
 @bp.route("/constellations/<int:ref>")

@@ -77,6 +77,9 @@ def open_provider(name: str, config: Config) -> Provider:
             "public_cidr": config.local_public_cidr,
             "prefix": config.local_prefix,
             "hidden_paths": (str(config.instance_dir),),
+            "max_hosts": config.local_max_hosts,
+            "host_memory_mib": config.local_host_memory_mb,
+            "memory_reserve_mib": config.local_memory_reserve_mb,
         }
     try:
         driver = spec.open(settings, config.instance_dir)

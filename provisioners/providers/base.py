@@ -24,6 +24,7 @@ from libcloud.compute.base import (
 )
 from libcloud.compute.types import NodeState
 
+from provisioners.providers.capacity import Capacity, Demand
 from provisioners.providers.errors import ProviderError
 from provisioners.remote.firewall import FirewallRule
 from provisioners.remote.ssh import Route
@@ -101,6 +102,14 @@ class CloudSimNodeDriver(NodeDriver):  # type: ignore[misc]
         Without one (the default) the machines' host firewalls carry the rules alone.
         """
         return {}
+
+    def ex_prepare(self) -> list[str]:
+        """Make ready what every machine of this provider shares; return what changed."""
+        return []
+
+    def ex_capacity(self, pending: Demand | None = None) -> Capacity | None:
+        """Return what the provider can still take beyond pending; None: it does not know."""
+        return None
 
     def ex_list_nodes_by_tags(self, tags: Mapping[str, str]) -> list[Node]:
         """Return the nodes carrying every one of tags (all nodes for no tags)."""

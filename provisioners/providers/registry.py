@@ -21,7 +21,15 @@ from provisioners.providers.servers.inventory import Inventory
 
 Settings = Mapping[str, Any]
 # the local provider's settings come from the app's configuration, never from an admin
-LOCAL_SETTINGS = ("subnet_pool", "public_cidr", "prefix", "hidden_paths")
+LOCAL_SETTINGS = (
+    "subnet_pool",
+    "public_cidr",
+    "prefix",
+    "hidden_paths",
+    "max_hosts",
+    "host_memory_mib",
+    "memory_reserve_mib",
+)
 
 
 @dataclass(frozen=True)

@@ -95,6 +95,7 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_audit.Audit", "GET"): (401, 403, 403, 200, 200),
     ("api_constellations.Constellations", "GET"): (401, 200, 200, 200, 200),
     ("api_constellations.Constellations", "POST"): (401, 403, 403, 403, 202),
+    ("api_constellations.Capacity", "GET"): (401, 403, 403, 200, 200),
     ("api_constellations.ConstellationById", "GET"): (401, 200, 404, 200, 200),
     ("api_constellations.ConstellationById", "PATCH"): (401, 403, 403, 200, 200),
     ("api_constellations.ConstellationById", "DELETE"): (401, 403, 403, 403, 202),

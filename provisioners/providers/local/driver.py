@@ -17,6 +17,7 @@ from libcloud.compute.base import (
 )
 
 from provisioners.providers.base import CloudSimNodeDriver
+from provisioners.providers.capacity import Capacity, Demand
 from provisioners.providers.local import host, netns
 from provisioners.providers.local.addresses import (
     check_name,
@@ -24,6 +25,7 @@ from provisioners.providers.local.addresses import (
     parse_address,
     parse_subnet,
 )
+from provisioners.providers.local.capacity import Budget, capacity, raise_limits
 from provisioners.providers.local.errors import (
     InvalidRequestError,
     LocalProviderError,
@@ -41,6 +43,7 @@ IMAGE_ID = "debian-12"
 IMAGE_NAME = "debian-12 (this machine's root)"
 LOCATION_ID = "localhost"
 DEFAULT_BOOT_TIMEOUT_SECONDS = 60.0
+SUBNET_PREFIX = 24  # what ex_create_network allocates
 
 _Driver = TypeVar("_Driver", bound="LocalNodeDriver")
 _Params = ParamSpec("_Params")
@@ -86,8 +89,14 @@ class LocalNodeDriver(CloudSimNodeDriver):
         prefix: str = "cs",
         boot_timeout: float = DEFAULT_BOOT_TIMEOUT_SECONDS,
         hidden_paths: Sequence[str] = (),
+        max_hosts: int = 0,
+        host_memory_mib: int = Budget.host_memory_mib,
+        memory_reserve_mib: int = Budget.memory_reserve_mib,
     ) -> None:
         super().__init__(key=key, secret=secret)
+        if min(max_hosts, host_memory_mib - 1, memory_reserve_mib) < 0:
+            raise InvalidRequestError("max_hosts and memory figures must not be negative")
+        self.budget = Budget(max_hosts, host_memory_mib, memory_reserve_mib)
         state_path = Path(state_dir)
         # Overlay mount options are separated by commas and colons.
         if not state_path.is_absolute() or any(char in state_dir for char in ",:"):
@@ -162,6 +171,42 @@ class LocalNodeDriver(CloudSimNodeDriver):
             )
         return ["nsenter", f"--net={netns.netns_path(self._networks.public_switch_netns)}", *argv]
 
+    # -- capacity ------------------------------------------------------------------------------
+
+    @requires_root
+    def ex_prepare(self) -> list[str]:
+        """Raise the kernel limits the hosts share to what this machine can hold; return changes.
+
+        Idempotent (create_node calls it too): a limit already high enough is left alone.
+        """
+        return raise_limits(self.budget)
+
+    def ex_capacity(self, pending: Demand | None = None) -> Capacity | None:
+        """Return how many more hosts, networks and public addresses this machine can take,
+        beyond the existing ones and what pending (launches not created yet) will use.
+
+        None without root: no host can be made then, and the launch job says why.
+        """
+        if os.geteuid() != 0:
+            return None
+        nodes = self._store.read_nodes()
+        public = self._networks.public_subnet
+        # the network and broadcast addresses, and the "internet" end of the public network
+        free_public = public.num_addresses - 3 - sum(1 for n in nodes if n.public_ip)
+        return capacity(
+            self.budget, len(nodes), self._free_subnets(), free_public, pending or Demand()
+        )
+
+    def _free_subnets(self) -> int:
+        taken = [
+            parse_subnet(record.cidr)
+            for record in self._store.read_all_prefixes_networks()
+            if not record.public
+        ]
+        taken.append(self._networks.public_subnet)
+        candidates = self._networks.subnet_pool.subnets(new_prefix=SUBNET_PREFIX)
+        return sum(1 for c in candidates if not any(c.overlaps(t) for t in taken))
+
     # -- nodes ---------------------------------------------------------------------------------
 
     @requires_root
@@ -185,6 +230,7 @@ class LocalNodeDriver(CloudSimNodeDriver):
     ) -> Node:
         """Create and boot a host; return once its sshd accepts connections."""
         check_name("node", name)
+        self.ex_prepare()
         public_key = _public_key(auth)
         init = _choose_init(ex_init)
         tags = _check_tags(ex_tags)
