@@ -1,8 +1,11 @@
-"""Benchmark the web app under load: p50/p95 of dashboards and API lists, 20 concurrent clients.
+"""Benchmark the web app at season scale: p50/p95 and queries of every page and API list.
 
-Seeds 30 teams, 120 machines, 300 users and 1,000 jobs into a fresh instance, starts the
-production stack with `cloudsim up` (gunicorn, private Redis) on free loopback ports, and
-drives it with concurrent clients. Usage: python -m bench.web [--clients 20] [--rounds 15]
+Seeds a season (30 teams, 120 machines, 300 users, 1,000 jobs, 450 finished runs with score
+events and stored score and bandwidth logs) into a fresh instance, starts the production stack
+with `cloudsim up` (gunicorn, private Redis) on free loopback ports, counts each page's SQL
+statements in-process, and drives every GET page and API list an admin, an officer and a team
+user may open with concurrent clients, against the anonymous login page as the reference.
+Usage: python -m bench.web [--db sqlite|postgresql|both] [--clients 20] [--rounds 8]
 """
 
 from __future__ import annotations
@@ -18,38 +21,47 @@ import sys
 import tempfile
 import threading
 import time
-import uuid
-from datetime import timedelta
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import requests
+from flask import Flask
+from sqlalchemy import event, func, select
 
 from cloudsim import migrate
 from cloudsim.app import create_app
 from cloudsim.auth.passwords import hash_password
 from cloudsim.auth.tokens import issue_token
+from cloudsim.competition.artifacts import LogStore
 from cloudsim.config import Config
 from cloudsim.extensions import db
-from cloudsim.models import (
-    Constellation,
-    ConstellationState,
-    Job,
-    JobState,
-    Machine,
-    MachineState,
-    Role,
-    Team,
-    User,
-    utcnow,
-)
+from cloudsim.models import Job, Machine, Role, Run, ScoreEvent, Team, User
+from tests.support.season import add_credentials, add_season, new_teams, team_urls
+from tests.support.servers import PostgresServer
+from tests.web.test_authorization_matrix import MATRIX, PERSONAS
 
 PASSWORD = "benchmark password"
+# What bench/season.py's clients load: the dashboards and the main API lists.
 PAGES = {
     "admin": ["/", "/jobs", "/audit"],
     "officer": ["/", "/teams", "/users"],
     "user": ["/"],
 }
 API = ["/api/v1/jobs", "/api/v1/teams", "/api/v1/users", "/api/v1/constellations"]
+REFERENCE = "/login"  # anonymous, no query: what the stack costs around any page
+KINDS = ("admin", "officer", "user")
+MATRIX_PERSONA = {"admin": "admin", "officer": "officer", "user": "user_a"}
+
+
+@dataclass(frozen=True)
+class Visitor:
+    """Who a client logs in as, and the requests (name, path) it makes each round."""
+
+    email: str
+    requests: list[tuple[str, str]]
+    headers: dict[str, str] = field(default_factory=dict)  # its API token
 
 
 def free_port() -> int:
@@ -59,14 +71,12 @@ def free_port() -> int:
 
 
 def seed(env: dict[str, str]) -> dict[str, str]:
-    """Fill a fresh database; return the admin's API token."""
+    """Fill a fresh database with a season; return the admin's API headers."""
     app = create_app(Config.from_env(env))
     migrate.upgrade(app)
     with app.app_context():
         password_hash = hash_password(PASSWORD)
-        teams = [Team(name=f"Team {i:02d}") for i in range(30)]
-        db.session.add_all(teams)
-        db.session.flush()
+        teams = new_teams(30)
         users = [
             User(
                 email=f"user{i}@example.org",
@@ -82,40 +92,75 @@ def seed(env: dict[str, str]) -> dict[str, str]:
         ]
         admin = User(email="admin@example.org", role=Role.ADMIN, password_hash=password_hash)
         db.session.add_all([*users, admin])
-        for team in teams:
-            constellation = Constellation(
-                name=f"vrc-{team.id}",
-                kind="vrc",
-                provider="local",
-                team_id=team.id,
-                state=ConstellationState.READY,
-            )
-            for n, role in enumerate(("router", "sim", "fc1", "fc2")):
-                constellation.machines.append(
-                    Machine(
-                        name=role,
-                        role=role,
-                        state=MachineState.READY,
-                        private_ip=f"10.{team.id}.0.{50 + n}",
-                    )
-                )
-            db.session.add(constellation)
-        now = utcnow()
-        db.session.add_all(
-            Job(
-                id=str(uuid.uuid4()),
-                kind="diagnostics",
-                state=JobState.SUCCEEDED,
-                team_id=teams[i % 30].id,
-                progress=100,
-                log="ok\n" * 20,
-                created_at=now - timedelta(minutes=i),
-            )
-            for i in range(1000)
+        for user in users:
+            add_credentials(user, 1)
+        store = LogStore(app.config["CLOUDSIM"])
+        # a 30-minute run's bandwidth log: what the run page charts
+        add_season(
+            store, teams, password_hash, users=0, runs=15, jobs=34, events=8, log_seconds=1800
         )
         token = issue_token(admin, "bench").plaintext
         db.session.commit()  # services only flush: the seeding is the boundary here
         return {"Authorization": f"Bearer {token}"}
+
+
+def seeded(app: Flask) -> str:
+    """Say what the database holds."""
+    with app.app_context():
+        count = {
+            m.__name__: db.session.scalar(select(func.count()).select_from(m))
+            for m in (Team, User, Machine, Job, Run, ScoreEvent)
+        }
+    return (
+        f"{count['Team']} teams, {count['Machine']} machines, {count['User']} users, "
+        f"{count['Job']:,} jobs, {count['Run']} finished runs, {count['ScoreEvent']:,} score events"
+    )
+
+
+def season_visitors(app: Flask) -> dict[str, Visitor]:
+    """Return per kind the visitor opening every GET page and API list it may (team 1's rows)."""
+    with app.app_context():
+        team = db.session.scalar(select(Team).order_by(Team.id).limit(1))
+        assert team is not None
+        gets = {endpoint for endpoint, method in MATRIX if method == "GET"}
+        urls = team_urls(app, team.id, gets)
+        member = db.session.scalar(
+            select(User).where(User.team_id == team.id).order_by(User.id).limit(1)
+        )
+        emails = {
+            "admin": "admin@example.org",
+            "officer": "officer0@example.org",
+            "user": member.email,
+        }
+        visitors = {}
+        for kind, email in emails.items():
+            user = db.session.scalar(select(User).where(User.email == email))
+            column = PERSONAS.index(MATRIX_PERSONA[kind])
+            visitors[kind] = Visitor(
+                email,
+                [
+                    (f"{kind} {e}", u)
+                    for e, u in sorted(urls.items())
+                    if MATRIX[(e, "GET")][column] == 200
+                ],
+                {"Authorization": f"Bearer {issue_token(user, 'bench').plaintext}"},
+            )
+        db.session.commit()
+        return visitors
+
+
+def default_visitor(number: int, headers: dict[str, str]) -> Visitor:
+    """Return the n-th client's visitor of the dashboards benchmark (admins add the API lists)."""
+    kind = KINDS[number % 3]
+    email = {
+        "admin": "admin@example.org",
+        "officer": f"officer{number % 3}@example.org",
+        "user": f"user{number}@example.org",
+    }[kind]
+    paths = [(f"{kind} {p}", p) for p in PAGES[kind]]
+    if kind == "admin":
+        paths += [(f"api {p}", p) for p in API] * len(PAGES[kind])
+    return Visitor(email, paths, headers if kind == "admin" else {})
 
 
 def log_in(base: str, email: str) -> requests.Session:
@@ -132,35 +177,40 @@ def log_in(base: str, email: str) -> requests.Session:
     return session
 
 
-def drive(base: str, headers: dict[str, str], clients: int, rounds: int) -> dict[str, list[float]]:
-    """Run the clients; return the latencies (seconds) per request name."""
+def drive(
+    base: str,
+    headers: dict[str, str],
+    clients: int,
+    rounds: int,
+    visitor: Callable[[int], Visitor] | None = None,
+) -> dict[str, list[float]]:
+    """Run the clients; return the latencies (seconds) per request name.
+
+    Client n is `visitor(n)` (default: the dashboards and, for admins, the API lists).
+    """
+    pick = visitor or (lambda number: default_visitor(number, headers))
     timings: dict[str, list[float]] = {}
     lock = threading.Lock()
     errors: list[str] = []
 
     def client(number: int) -> None:
-        kind = ("admin", "officer", "user")[number % 3]
-        email = {
-            "admin": "admin@example.org",
-            "officer": f"officer{number % 3}@example.org",
-            "user": f"user{number}@example.org",
-        }[kind]
-        session = log_in(base, email)
+        me = pick(number)
+        session = log_in(base, me.email)
         api = requests.Session()
-        api.headers.update(headers)
+        api.headers.update(me.headers)
+        anonymous = requests.Session()
         for _ in range(rounds):
-            for path in PAGES[kind]:
-                requests_ = [(f"{kind} {path}", session, path)]
-                if kind == "admin":
-                    requests_ += [(f"api {p}", api, p) for p in API]
-                for name, http, url in requests_:
-                    start = time.perf_counter()
-                    response = http.get(base + url, timeout=60)
-                    elapsed = time.perf_counter() - start
-                    with lock:
-                        timings.setdefault(name, []).append(elapsed)
-                        if response.status_code != 200:
-                            errors.append(f"{name}: {response.status_code}")
+            batch = [*me.requests, (f"reference GET {REFERENCE} (anonymous)", REFERENCE)]
+            for name, url in batch:
+                http = api if url.startswith("/api/") else session
+                http = anonymous if url == REFERENCE else http
+                start = time.perf_counter()
+                response = http.get(base + url, timeout=60)
+                elapsed = time.perf_counter() - start
+                with lock:
+                    timings.setdefault(name, []).append(elapsed)
+                    if response.status_code != 200:
+                        errors.append(f"{name}: {response.status_code}")
 
     threads = [threading.Thread(target=client, args=(n,)) for n in range(clients)]
     for thread in threads:
@@ -172,30 +222,40 @@ def drive(base: str, headers: dict[str, str], clients: int, rounds: int) -> dict
     return timings
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--clients", type=int, default=20)
-    parser.add_argument("--rounds", type=int, default=15)
-    parser.add_argument("--database-url", help="default: SQLite in a temporary instance")
-    args = parser.parse_args()
-    instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-"))
-    web = free_port()
-    env = dict(
-        os.environ,
-        CLOUDSIM_INSTANCE_DIR=str(instance),
-        CLOUDSIM_BIND=f"127.0.0.1:{web}",
-        CLOUDSIM_REDIS_PORT=str(free_port()),
-        CLOUDSIM_LOG_LEVEL="WARNING",
-        CLOUDSIM_ADMIN_EMAIL="admin@example.org",
-        CLOUDSIM_LOGIN_LIMIT="1000 per minute",
-    )
-    env.pop("CLOUDSIM_REDIS_URL", None)
-    if args.database_url:
-        env["CLOUDSIM_DATABASE_URL"] = args.database_url
-    headers = seed(env)
+def count_queries(app: Flask, visitors: dict[str, Visitor]) -> dict[str, int]:
+    """Return the SQL statements each request makes, counted in-process."""
+    counts: dict[str, int] = {}
+    statements: list[str] = []
+    with app.app_context():
+        engine = db.engine
+    # Requests outside any app context of ours: each gets its own, as under gunicorn.
+    listen = lambda *args: statements.append(args[2])  # noqa: E731
+    event.listen(engine, "before_cursor_execute", listen)
+    try:
+        for me in visitors.values():
+            client = app.test_client()
+            page = client.get("/login").get_data(as_text=True)
+            token = re.search(r'name="csrf_token" type="hidden" value="([^"]+)"', page)
+            assert token
+            form = {"email": me.email, "password": PASSWORD, "csrf_token": token[1]}
+            assert client.post("/login", data=form).status_code == 302
+            for name, url in [*me.requests, (f"reference GET {REFERENCE} (anonymous)", REFERENCE)]:
+                http = app.test_client() if url == REFERENCE else client
+                statements.clear()
+                headers = me.headers if url.startswith("/api/") else {}
+                http.get(url, headers=headers).get_data()  # a streamed answer queries as read
+                counts[name] = len(statements)
+    finally:
+        event.remove(engine, "before_cursor_execute", listen)
+    return counts
+
+
+@contextmanager
+def stack(env: dict[str, str], instance: Path) -> Iterator[str]:
+    """Run `cloudsim up` with env; yield its base URL; stop it with Ctrl-C."""
     log = instance / "up.log"
     with log.open("wb") as out:
-        stack = subprocess.Popen(
+        process = subprocess.Popen(
             [sys.executable, "-m", "cloudsim.cli", "up"],
             env=env,
             stdout=out,
@@ -205,29 +265,106 @@ def main() -> None:
     try:
         deadline = time.monotonic() + 90
         while "CloudSim is running" not in log.read_text():
-            if time.monotonic() > deadline or stack.poll() is not None:
+            if time.monotonic() > deadline or process.poll() is not None:
                 raise SystemExit(f"cloudsim up did not start:\n{log.read_text()}")
             time.sleep(0.2)
-        base = f"http://127.0.0.1:{web}"
-        started = time.perf_counter()
-        timings = drive(base, headers, args.clients, args.rounds)
-        wall = time.perf_counter() - started
+        yield f"http://127.0.0.1:{env['CLOUDSIM_BIND'].rsplit(':', 1)[1]}"
     finally:
-        stack.send_signal(signal.SIGINT)
-        stack.wait(60)
-    total = sum(len(v) for v in timings.values())
-    print(
-        f"web benchmark: {args.clients} clients, {total} requests in {wall:.1f} s "
-        f"({total / wall:.0f} req/s), gunicorn {env.get('CLOUDSIM_WEB_WORKERS', '2')} workers, "
-        f"{'PostgreSQL' if args.database_url else 'SQLite'}"
+        process.send_signal(signal.SIGINT)
+        process.wait(60)
+
+
+def bench_env(instance: Path, database_url: str | None) -> dict[str, str]:
+    env = dict(
+        os.environ,
+        CLOUDSIM_INSTANCE_DIR=str(instance),
+        CLOUDSIM_BIND=f"127.0.0.1:{free_port()}",
+        CLOUDSIM_REDIS_PORT=str(free_port()),
+        CLOUDSIM_LOG_LEVEL="WARNING",
+        CLOUDSIM_ADMIN_EMAIL="admin@example.org",
+        CLOUDSIM_LOGIN_LIMIT="1000 per minute",
     )
-    print("seeded: 30 teams, 120 machines, 300 users, 1,000 jobs")
-    print(f"{'request':34} {'n':>5} {'p50 ms':>8} {'p95 ms':>8} {'p95/p50':>8}")
+    env.pop("CLOUDSIM_REDIS_URL", None)
+    if database_url:
+        env["CLOUDSIM_DATABASE_URL"] = database_url
+    return env
+
+
+def measure(label: str, database_url: str | None, clients: int, rounds: int) -> None:
+    """Seed a season on one database, load it, print the table."""
+    instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-"))
+    env = bench_env(instance, database_url)
+    started = time.perf_counter()
+    seed(env)
+    seeding = time.perf_counter() - started
+    app = create_app(Config.from_env(env))
+    visitors = season_visitors(app)
+    kinds = [visitors[KINDS[n % 3]] for n in range(clients)]
+    with stack(env, instance) as base:
+        queries = count_queries(app, visitors)
+        started = time.perf_counter()
+        timings = drive(base, {}, clients, rounds, lambda number: kinds[number])
+        wall = time.perf_counter() - started
+    report(label, seeded(app), seeding, timings, queries, wall, clients)
+
+
+def report(
+    label: str,
+    what: str,
+    seeding: float,
+    timings: dict[str, list[float]],
+    queries: dict[str, int],
+    wall: float,
+    clients: int,
+) -> None:
+    total = sum(len(v) for v in timings.values())
+    load = os.getloadavg()
+    print(
+        f"\nweb benchmark on {label}: {clients} clients, {total} requests in {wall:.1f} s "
+        f"({total / wall:.0f} req/s), gunicorn {os.environ.get('CLOUDSIM_WEB_WORKERS', '2')} "
+        f"workers; load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}"
+    )
+    print(f"seeded in {seeding:.0f} s: {what}")
+
+    def p95(values: list[float]) -> float:
+        return sorted(values)[int(0.95 * (len(values) - 1))] * 1000
+
+    reference = next(v for k, v in timings.items() if k.startswith("reference"))
+    ref95 = p95(reference)
+    print(f"{'request':44} {'n':>4} {'queries':>7} {'p50 ms':>7} {'p95 ms':>7} {'p95/ref':>7}")
+    slow = []
     for name, values in sorted(timings.items()):
-        values.sort()
         p50 = statistics.median(values) * 1000
-        p95 = values[int(0.95 * (len(values) - 1))] * 1000
-        print(f"{name:34} {len(values):5d} {p50:8.1f} {p95:8.1f} {p95 / p50:8.2f}")
+        worst = p95(values)
+        mark = " *" if worst >= 100 else ""
+        if mark:
+            slow.append(name)
+        print(
+            f"{name:44} {len(values):4d} {queries.get(name, 0):7d} {p50:7.1f} {worst:7.1f} "
+            f"{worst / ref95:7.2f}{mark}"
+        )
+    print(f"p95 >= 100 ms (*): {', '.join(slow) if slow else 'none'}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--db", choices=("sqlite", "postgresql", "both"), default="both")
+    parser.add_argument("--clients", type=int, default=20)
+    parser.add_argument("--rounds", type=int, default=8)
+    parser.add_argument("--database-url", help="a PostgreSQL to use instead of a private one")
+    args = parser.parse_args()
+    if args.db in ("sqlite", "both"):
+        measure("SQLite", None, args.clients, args.rounds)
+    if args.db in ("postgresql", "both"):
+        if args.database_url:
+            measure("PostgreSQL", args.database_url, args.clients, args.rounds)
+            return
+        server = PostgresServer()  # the test harness's private cluster, stopped by its PID
+        try:
+            url = server.create_database("cloudsim_bench")
+            measure("PostgreSQL (private, fsync off)", url, args.clients, args.rounds)
+        finally:
+            server.stop()
 
 
 if __name__ == "__main__":

@@ -31,15 +31,25 @@ from cloudsim.models import Role, Run, User
 from cloudsim.people.service import visible_teams
 from cloudsim.web import format_datetime
 from cloudsim.web.downloads import attachment
+from cloudsim.web.inputs import query_int
 
 bp = Blueprint("competition", __name__)
+# A season holds hundreds of tasks and runs: the pages show them a page at a time.
+TASKS_PAGE = 100
+RUNS_PAGE = 50
 
 
 def _tasks_page(form: ScheduleForm, import_form: ImportForm, status: int = 200) -> Any:
-    tasks = db.session.scalars(schedule.visible_tasks(current_user)).all()
+    page = db.paginate(
+        schedule.visible_tasks(current_user),
+        page=query_int("page", 1, minimum=1),
+        per_page=TASKS_PAGE,
+        error_out=False,
+    )
     return render_template(
         "competition/tasks.html",
-        tasks=tasks,
+        page=page,
+        tasks=page.items,
         open_ids={t.id for t in schedule.open_tasks(current_user)},
         form=form,
         import_form=import_form,
@@ -127,8 +137,13 @@ def start(task_id: int) -> ResponseReturnValue:
 @bp.route("/runs")
 @login_required
 def runs() -> ResponseReturnValue:
-    shown = db.session.scalars(run_service.visible_runs(current_user).limit(200)).all()
-    return render_template("competition/runs.html", runs=shown)
+    page = db.paginate(
+        run_service.visible_runs(current_user),
+        page=query_int("page", 1, minimum=1),
+        per_page=RUNS_PAGE,
+        error_out=False,
+    )
+    return render_template("competition/runs.html", page=page)
 
 
 @bp.route("/runs/<int:run_id>")

@@ -12,7 +12,7 @@ from cloudsim.extensions import db
 from cloudsim.jobs.service import visible_jobs
 from cloudsim.launched_constellations.service import visible_constellations
 from cloudsim.models import Constellation, Role, Run, Task, Team, User, utcnow
-from cloudsim.people.service import visible_teams
+from cloudsim.people.service import member_counts, visible_teams
 
 bp = Blueprint("dashboard", __name__)
 RECENT = 10
@@ -34,9 +34,11 @@ def index() -> ResponseReturnValue:
             counts=_counts(),
         )
     if current_user.has_role(Role.OFFICER):
+        teams = visible_teams(current_user)
         return render_template(
             "dashboard/officer.html",
-            teams=visible_teams(current_user),
+            teams=teams,
+            members=member_counts(teams),
             counts=_counts(),
             tasks=db.session.scalars(
                 select(Task)

@@ -15,8 +15,9 @@ from cloudsim.models import Role, SshKey, Team, User
 from cloudsim.people import service
 
 
-def team_data(team: Team) -> dict[str, object]:
-    return {"id": team.id, "name": team.name, "members": len(team.members)}
+def team_data(team: Team, members: int | None = None) -> dict[str, object]:
+    count = len(team.members) if members is None else members
+    return {"id": team.id, "name": team.name, "members": count}
 
 
 def user_data(user: User) -> dict[str, object]:
@@ -53,8 +54,9 @@ def list_teams(as_json: bool) -> None:
     """List teams."""
     with app_context():
         teams = service.visible_teams(SYSTEM)
-        lines = "\n".join(f"{t.id}\t{t.name}\t{len(t.members)} members" for t in teams)
-        emit([team_data(t) for t in teams], as_json, lines or "no teams")
+        members = service.member_counts(teams)
+        lines = "\n".join(f"{t.id}\t{t.name}\t{members[t.id]} members" for t in teams)
+        emit([team_data(t, members[t.id]) for t in teams], as_json, lines or "no teams")
 
 
 @click.group()

@@ -71,10 +71,20 @@ def find_team(name_or_id: str) -> Team:
 
 def visible_teams(actor: Actor) -> list[Team]:
     """Return the teams the actor may see, by name."""
-    query = select(Team).order_by(Team.name).options(selectinload(Team.members))
+    query = select(Team).order_by(Team.name)
     if not actor.has_role(Role.OFFICER):
         query = query.where(Team.id == actor.team_id)
     return list(db.session.scalars(query))
+
+
+def member_counts(teams: list[Team]) -> dict[int, int]:
+    """Return each team's number of members (every team listed, in one query)."""
+    counted = db.session.execute(
+        select(User.team_id, func.count(User.id))
+        .where(User.team_id.in_([t.id for t in teams]))
+        .group_by(User.team_id)
+    )
+    return {t.id: 0 for t in teams} | {team_id: n for team_id, n in counted if team_id}
 
 
 def _clean_team_name(name: str) -> str:

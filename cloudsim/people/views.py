@@ -22,9 +22,13 @@ bp = Blueprint("people", __name__)
 @bp.route("/teams")
 @role_required(Role.OFFICER)
 def teams() -> ResponseReturnValue:
-    return render_template(
-        "people/teams.html", teams=service.visible_teams(current_user), form=TeamForm()
-    )
+    return _teams_page(TeamForm())
+
+
+def _teams_page(form: TeamForm, status: int = 200) -> ResponseReturnValue:
+    teams = service.visible_teams(current_user)
+    members = service.member_counts(teams)
+    return render_template("people/teams.html", teams=teams, members=members, form=form), status
 
 
 @bp.route("/teams", methods=["POST"])
@@ -43,9 +47,7 @@ def create_team() -> ResponseReturnValue:
             return redirect(url_for("people.team", team_id=team.id))
     else:
         status = 400
-    return render_template(
-        "people/teams.html", teams=service.visible_teams(current_user), form=form
-    ), status
+    return _teams_page(form, status)
 
 
 @bp.route("/teams/<int:team_id>")

@@ -12,9 +12,12 @@ import itertools
 import json
 import tempfile
 import uuid
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from datetime import timedelta
 from pathlib import Path
+
+from flask import Flask, url_for
+from sqlalchemy import select
 
 from cloudsim.auth.ssh_keys import ParsedKey, parse_public_key
 from cloudsim.competition.artifacts import LogStore, file_sha256
@@ -260,3 +263,30 @@ def bandwidth_log(seconds: int) -> str:
                 }
             )
     return "".join(json.dumps(line) + "\n" for line in lines)
+
+
+def team_urls(app: Flask, team_id: int, endpoints: Iterable[str]) -> dict[str, str]:
+    """Return endpoint -> URL of GET routes, their ids pointing at the team's newest rows."""
+    run = db.session.scalar(
+        select(Run).where(Run.team_id == team_id).order_by(Run.id.desc()).limit(1)
+    )
+    assert run is not None, "the team has no run: seed a season first"
+    ids = {
+        "team_id": team_id,
+        "user_id": db.session.scalar(select(User.id).where(User.team_id == team_id).limit(1)),
+        "job_id": db.session.scalar(select(Job.id).where(Job.team_id == team_id).limit(1)),
+        "ref": db.session.scalar(
+            select(Constellation.id).where(Constellation.team_id == team_id).limit(1)
+        ),
+        "task_id": run.task_id,
+        "run_id": run.id,
+        "artifact_id": run.artifacts[0].id,
+    }
+    wanted = set(endpoints)
+    found = {}
+    with app.test_request_context():
+        for rule in app.url_map.iter_rules():
+            if rule.endpoint in wanted and "GET" in (rule.methods or ()):
+                values = {k: v for k, v in ids.items() if k in rule.arguments}
+                found[rule.endpoint] = url_for(rule.endpoint, **values)
+    return found

@@ -11,15 +11,15 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from flask import Flask, current_app, url_for
+from flask import Flask, current_app
 from flask.testing import FlaskClient
-from sqlalchemy import event, select
+from sqlalchemy import event
 
 from cloudsim.competition.artifacts import LogStore
 from cloudsim.extensions import db
-from cloudsim.models import Constellation, Job, Role, Run, Task, Team, User
+from cloudsim.models import Role, Team, User
 from tests.conftest import log_in, make_user, token_for
-from tests.support.season import add_credentials, add_season, new_teams
+from tests.support.season import add_credentials, add_season, new_teams, team_urls
 from tests.web.test_authorization_matrix import MATRIX, PERSONAS
 
 VISITORS = ("user_a", "officer", "admin")
@@ -52,34 +52,15 @@ def grow(team_a: Team, others: list[Team], people: dict[str, User], scale: int) 
 
 
 def urls(app: Flask, team_a: Team) -> dict[tuple[str, str], str]:
-    """Return (persona, endpoint) -> URL of every GET route, pointing at team A's newest rows."""
-    newest_run = db.session.scalar(
-        select(Run).where(Run.team_id == team_a.id).order_by(Run.id.desc()).limit(1)
-    )
-    assert newest_run is not None
-    ids = {
-        "team_id": team_a.id,
-        "user_id": db.session.scalar(select(User.id).where(User.team_id == team_a.id).limit(1)),
-        "job_id": db.session.scalar(select(Job.id).where(Job.team_id == team_a.id).limit(1)),
-        "ref": db.session.scalar(
-            select(Constellation.id).where(Constellation.team_id == team_a.id).limit(1)
-        ),
-        "task_id": db.session.scalar(
-            select(Task.id).where(Task.team_id == team_a.id).order_by(Task.id.desc()).limit(1)
-        ),
-        "run_id": newest_run.id,
-        "artifact_id": newest_run.artifacts[0].id,
+    """Return (persona, endpoint) -> URL of every GET route each visitor may open."""
+    gets = {endpoint for endpoint, method in MATRIX if method == "GET"}
+    found = team_urls(app, team_a.id, gets)
+    return {
+        (persona, endpoint): url
+        for endpoint, url in found.items()
+        for persona in VISITORS
+        if MATRIX[(endpoint, "GET")][PERSONAS.index(persona)] == 200
     }
-    found = {}
-    with app.test_request_context():
-        for rule in app.url_map.iter_rules():
-            if (rule.endpoint, "GET") not in MATRIX:
-                continue
-            values = {k: v for k, v in ids.items() if k in rule.arguments}
-            for persona in VISITORS:
-                if MATRIX[(rule.endpoint, "GET")][PERSONAS.index(persona)] == 200:
-                    found[(persona, rule.endpoint)] = url_for(rule.endpoint, **values)
-    return found
 
 
 def visit_all(
