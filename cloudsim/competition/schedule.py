@@ -184,7 +184,7 @@ def visible_tasks(actor: Actor) -> Select[Task]:
     """Return a query for the tasks the actor may see, in schedule order."""
     query = (
         select(Task)
-        .options(selectinload(Task.team), selectinload(Task.runs))
+        .options(selectinload(Task.team))
         .order_by(Task.window_start, Task.order, Task.id)
     )
     if not _sees_everything(actor):

@@ -45,6 +45,8 @@ from cloudsim.extensions import db
 from cloudsim.models import Role, Task, Team
 
 MAX_TASKS = 1000
+# libyaml's emitter when PyYAML was built with it (its wheels are), else the pure-Python one
+SafeDumper: Any = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 TASK_KEYS = {
     "name",
     "world",
@@ -200,7 +202,7 @@ def export_season(actor: Actor, zone_name: str | None = None) -> str:
             entry["teams"] = sorted(names)
         entries.append(entry)
     document = {"time_zone": document_zone, "tasks": entries}
-    return yaml.safe_dump(document, sort_keys=False, allow_unicode=True)
+    return yaml.dump(document, Dumper=SafeDumper, sort_keys=False, allow_unicode=True)
 
 
 SPEC_FIELDS = (

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from datetime import datetime
 from typing import Any
 
@@ -17,6 +18,7 @@ from flask import (
 )
 from flask.typing import ResponseReturnValue
 from flask_login import current_user, login_required
+from sqlalchemy.orm import selectinload
 
 from cloudsim.auth.forms import ConfirmForm
 from cloudsim.auth.policy import role_required
@@ -27,7 +29,7 @@ from cloudsim.competition.forms import ImportForm, ScheduleForm
 from cloudsim.competition.plots import bandwidth_charts, score_chart
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
-from cloudsim.models import Role, Run, User
+from cloudsim.models import Role, Run, Task, User
 from cloudsim.people.service import visible_teams
 from cloudsim.web import format_datetime
 from cloudsim.web.downloads import attachment
@@ -37,11 +39,14 @@ bp = Blueprint("competition", __name__)
 # A season holds hundreds of tasks and runs: the pages show them a page at a time.
 TASKS_PAGE = 100
 RUNS_PAGE = 50
+CHARTS_KEPT = 32  # runs whose bandwidth charts a worker keeps (~130 kB each for 30 minutes)
+_CHARTS: dict[str, list[Any]] = {}
+_CHARTS_LOCK = threading.Lock()
 
 
 def _tasks_page(form: ScheduleForm, import_form: ImportForm, status: int = 200) -> Any:
     page = db.paginate(
-        schedule.visible_tasks(current_user),
+        schedule.visible_tasks(current_user).options(selectinload(Task.runs)),
         page=query_int("page", 1, minimum=1),
         per_page=TASKS_PAGE,
         error_out=False,
@@ -171,8 +176,18 @@ def bandwidth_plots_of(run: Run) -> list[Any]:
     bandwidth = next((a for a in run.artifacts if a.filename == "bandwidth.jsonl"), None)
     if bandwidth is None:
         return []
-    store = LogStore(current_app.config["CLOUDSIM"])
-    return bandwidth_charts(read_bandwidth_log(store.lines(bandwidth.location)))
+    # A stored log never changes under its checksum: chart it once per worker, not per view
+    # (the store may be a remote object store, and a 30-minute log is 3,600 lines).
+    with _CHARTS_LOCK:
+        charts = _CHARTS.pop(bandwidth.sha256, None)
+    if charts is None:
+        store = LogStore(current_app.config["CLOUDSIM"])
+        charts = bandwidth_charts(read_bandwidth_log(store.lines(bandwidth.location)))
+    with _CHARTS_LOCK:
+        _CHARTS[bandwidth.sha256] = charts  # the most recently viewed last
+        while len(_CHARTS) > CHARTS_KEPT:
+            _CHARTS.pop(next(iter(_CHARTS)))
+    return charts
 
 
 def _score_after(run: Run, sim_time: float) -> int:
