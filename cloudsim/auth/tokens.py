@@ -5,8 +5,10 @@ from __future__ import annotations
 import hashlib
 import secrets
 from dataclasses import dataclass
+from datetime import timedelta
 
 from sqlalchemy import select
+from sqlalchemy.orm import joinedload
 
 from cloudsim.audit.service import record
 from cloudsim.errors import InvalidInput, NotFound
@@ -15,6 +17,7 @@ from cloudsim.models import ApiToken, User, utcnow
 
 TOKEN_PREFIX = "cst_"  # noqa: S105 (a marker, not a secret)
 MAX_ACTIVE_TOKENS = 20
+USE_NOTED_EVERY = timedelta(minutes=1)  # how finely a token's last use is kept
 
 
 @dataclass
@@ -74,8 +77,16 @@ def user_for_token(plaintext: str) -> User | None:
     """Return the active user a live token belongs to, noting its use."""
     if not plaintext.startswith(TOKEN_PREFIX):
         return None
-    token = db.session.scalar(select(ApiToken).where(ApiToken.token_hash == _digest(plaintext)))
+    token = db.session.scalar(
+        select(ApiToken)
+        .options(joinedload(ApiToken.user))
+        .where(ApiToken.token_hash == _digest(plaintext))
+    )
     if token is None or token.revoked_at is not None or not token.user.active:
         return None
-    token.last_used_at = utcnow()  # committed with the request
+    now = utcnow()
+    # Noting every use would make every API read a database write (SQLite serialises them
+    # all): "last used" to the minute is what the account page needs.
+    if token.last_used_at is None or now - token.last_used_at >= USE_NOTED_EVERY:
+        token.last_used_at = now  # committed with the request
     return token.user

@@ -6,7 +6,7 @@ from typing import Any
 
 from flask.views import MethodView
 
-from cloudsim.api.common import Blueprint, caller, caller_with, columns
+from cloudsim.api.common import Blueprint, SelectPage, caller, caller_with, columns
 from cloudsim.models import Role
 from cloudsim.people import service
 from cloudsim.people.schemas import (
@@ -56,9 +56,10 @@ class TeamById(MethodView):
 @blp.route("/users")
 class Users(MethodView):
     @blp.response(200, UserSchema(many=True))
+    @blp.paginate(SelectPage, page_size=100, max_page_size=1000)
     def get(self) -> Any:
-        """List users (officers and admins)."""
-        return service.visible_users(caller_with(Role.OFFICER, "list users"))
+        """List users by e-mail (officers and admins)."""
+        return service.users_query(caller_with(Role.OFFICER, "list users"))
 
     @blp.arguments(UserCreateSchema)
     @blp.response(201, UserCreatedSchema)

@@ -6,7 +6,7 @@ import enum
 from dataclasses import dataclass
 
 from email_validator import EmailNotValidError, validate_email
-from sqlalchemy import func, select
+from sqlalchemy import Select, func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import selectinload
 
@@ -195,12 +195,17 @@ def find_user(email_or_id: str) -> User:
 
 def visible_users(actor: Actor, team_id: int | None = None) -> list[User]:
     """Return the users the actor may see: officers all, users their own team's."""
-    query = select(User).order_by(User.email).options(selectinload(User.team))
+    return list(db.session.scalars(users_query(actor, team_id)))
+
+
+def users_query(actor: Actor, team_id: int | None = None) -> Select[User]:
+    """Return a query for the users the actor may see, by e-mail."""
+    query = select(User).order_by(User.email, User.id).options(selectinload(User.team))
     if not actor.has_role(Role.OFFICER):
         query = query.where(User.team_id == actor.team_id)
     if team_id is not None:
         query = query.where(User.team_id == team_id)
-    return list(db.session.scalars(query))
+    return query
 
 
 def _check_manage(actor: Actor, role: Role) -> None:
