@@ -127,6 +127,14 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_RUN_GRACE_SECONDS": Setting(
         "120", "Wall seconds past a run's timeout after which CloudSim stops it regardless"
     ),
+    "CLOUDSIM_RUN_PROBE_SECONDS": Setting(
+        "10",
+        "How long a supervision beat waits for a machine's answer; a slower one is reported late,"
+        " the others do not wait",
+    ),
+    "CLOUDSIM_SSH_CONNECTIONS": Setting(
+        "256", "SSH connections a worker process keeps open between beats (oldest closed first)"
+    ),
     "CLOUDSIM_VIEWER_LIVE_HZ": Setting(
         "10", "Frames per simulated second a live 3D viewer receives (the relay's rate)"
     ),
@@ -183,6 +191,8 @@ class Config:
     leaderboard_for_users: str
     run_supervise_seconds: int
     run_grace_seconds: int
+    run_probe_seconds: int
+    ssh_connections: int
     viewer_live_hz: int
     viewer_live_delay_ms: int
     viewer_poll_ms: int
@@ -215,6 +225,12 @@ class Config:
                 return int(get(name))
             except ValueError:
                 raise ConfigError(f"{name} must be a whole number, got {get(name)!r}") from None
+
+        def positive(name: str) -> int:
+            value = number(name)
+            if value < 1:
+                raise ConfigError(f"{name} must be at least 1, got {value}")
+            return value
 
         instance_dir = Path(str(overrides.pop("instance_dir", get("CLOUDSIM_INSTANCE_DIR"))))
         instance_dir = instance_dir.expanduser().resolve()
@@ -276,6 +292,8 @@ class Config:
             ),
             run_supervise_seconds=number("CLOUDSIM_RUN_SUPERVISE_SECONDS"),
             run_grace_seconds=number("CLOUDSIM_RUN_GRACE_SECONDS"),
+            run_probe_seconds=positive("CLOUDSIM_RUN_PROBE_SECONDS"),
+            ssh_connections=positive("CLOUDSIM_SSH_CONNECTIONS"),
             viewer_live_hz=number("CLOUDSIM_VIEWER_LIVE_HZ"),
             viewer_live_delay_ms=number("CLOUDSIM_VIEWER_LIVE_DELAY_MS"),
             viewer_poll_ms=number("CLOUDSIM_VIEWER_POLL_MS"),

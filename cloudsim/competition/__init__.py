@@ -11,7 +11,7 @@ from flask import Flask
 def init_app(app: Flask) -> None:
     """Register this feature's pages, API and jobs with the app."""
     from cloudsim.api import register_api
-    from cloudsim.competition import api, demo, jobs, views  # noqa: F401 (tasks)
+    from cloudsim.competition import api, demo, jobs, supervision, views  # noqa: F401 (tasks)
     from cloudsim.jobs.queue import schedule_task
 
     app.register_blueprint(views.bp)

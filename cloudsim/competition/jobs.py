@@ -1,25 +1,20 @@
-"""A run's life as jobs: start (arm the router, start the simulator), stop (stop it, disarm,
-collect the logs, score), and the beat that notices when a live run must end.
+"""A run's life as jobs: start (arm the router, start the simulator) and stop (stop it,
+disarm, collect the logs, score).
 
 The simulator runs on `sim` as a transient systemd service, so it outlives the job (and the
-worker) that started it; the beat decides when it ends, whoever started it.
+worker) that started it; the beat (`supervision.py`) decides when it ends, whoever started it.
 """
 
 from __future__ import annotations
 
-import logging
 import shlex
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
-from datetime import datetime, timedelta
+from dataclasses import dataclass, field
 
-from celery import shared_task
 from csrouter.bandwidth_log import read_bandwidth_log
-from csrouter.protocol import payload_bits_used, spent_at
 from drcsim.rundir import FINAL, SCORE, read_score_log, serve_argv
 from flask import current_app
-from sqlalchemy import select
 
 from cloudsim.competition import current_run, lifecycle
 from cloudsim.competition.artifacts import (
@@ -37,14 +32,12 @@ from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.launched_constellations import router_control
 from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair
-from cloudsim.models import Job, JobState, Run, RunState, ScoreEvent, utcnow
-from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor, SSHTarget
+from cloudsim.models import Run, RunState, ScoreEvent, utcnow
+from provisioners.remote.ssh import ConnectPolicy, HostKeys, SSHError, SSHExecutor, SSHTarget
 
-log = logging.getLogger(__name__)
 ROUTER_FAULT = "router fault (OCU traffic is held until it is fixed): "
 DRCSIM = "/opt/drcsim/bin/drcsim"
 STOP_TIMEOUT_S = 60
-MAX_STOP_ATTEMPTS = 3
 
 
 class RunError(CloudSimError):
@@ -54,6 +47,19 @@ class RunError(CloudSimError):
 def unit_name(run_id: int) -> str:
     """Return the systemd unit the run's simulator runs as on `sim`."""
     return f"drcsim-run-{run_id}"
+
+
+@dataclass(frozen=True)
+class RunTargets:
+    """How to reach a run's constellation: a target per machine, its host keys, its login key."""
+
+    sim: SSHTarget
+    router: SSHTarget | None
+    sim_ip: str
+    by_name: dict[str, SSHTarget]
+    host_keys: HostKeys
+    private_key: str = field(repr=False)
+    fc_names: tuple[str, ...] = ()
 
 
 @dataclass
@@ -79,14 +85,8 @@ class Machines:
         return found
 
 
-@contextmanager
-def machines(
-    run: Run,
-    config: Config,
-    ctx: JobContext | None = None,
-    sink: Callable[[str, str], None] | None = None,
-) -> Iterator[Machines]:
-    """Connect to the run's sim and router; output lines go to the job log or to `sink`."""
+def run_targets(run: Run, config: Config) -> RunTargets:
+    """Return the SSH targets of the run's sim and router, from the machines' rows."""
     constellation = run.constellation
     if constellation is None:
         raise RunError(f"run {run.id}: its constellation no longer exists")
@@ -97,20 +97,40 @@ def machines(
     if sim is None or not sim.private_ip:
         raise RunError(f"{constellation.name} has no simulator machine")
     router = by_role.get("router")
+    return RunTargets(
+        sim=reach[sim.name],
+        router=reach[router.name] if router is not None else None,
+        sim_ip=sim.private_ip,
+        by_name=reach,
+        host_keys=machine_host_keys(constellation),
+        private_key=keys.private,
+        fc_names=tuple(m.name for m in constellation.machines if m.role == "fc"),
+    )
+
+
+@contextmanager
+def machines(
+    run: Run,
+    config: Config,
+    ctx: JobContext | None = None,
+    sink: Callable[[str, str], None] | None = None,
+) -> Iterator[Machines]:
+    """Connect to the run's sim and router; output lines go to the job log or to `sink`."""
+    found = run_targets(run, config)
     executor = SSHExecutor(
-        machine_host_keys(constellation),
+        found.host_keys,
         log_sink=ctx.line_sink() if ctx else sink,
-        secrets=[keys.private],
+        secrets=[found.private_key],
         connect_policy=ConnectPolicy(deadline=60),
     )
     with executor:
         yield Machines(
             executor=executor,
-            sim=reach[sim.name],
-            router=reach[router.name] if router is not None else None,
-            sim_ip=sim.private_ip,
-            by_name=reach,
-            fc_names=tuple(m.name for m in constellation.machines if m.role == "fc"),
+            sim=found.sim,
+            router=found.router,
+            sim_ip=found.sim_ip,
+            by_name=found.by_name,
+            fc_names=found.fc_names,
         )
 
 
@@ -291,103 +311,3 @@ def _end_reason(simulator: str | None, requested: str | None) -> str | None:
     if simulator in (None, "closed", "stopped") and requested:
         return requested
     return simulator
-
-
-@shared_task(name="cloudsim.competition.supervise")
-def supervise_runs() -> int:
-    """Start the stop job of every live run that must end; return how many were started."""
-    config: Config = current_app.config["CLOUDSIM"]
-    now = utcnow()
-    stopped = 0
-    for run in db.session.scalars(select(Run).where(Run.state == RunState.RUNNING)).all():
-        reason = run.stop_reason
-        if reason is None and now >= run.task.window_stop:
-            reason = "window"
-        started = run.running_at or run.started_at
-        limit = timedelta(seconds=run.task.timeout_s + config.run_grace_seconds)
-        if reason is None and now >= started + limit:
-            reason = "timeout"
-        if reason is None:
-            try:
-                reason = follow(run, config)
-            except (CloudSimError, SSHError) as exc:
-                log.warning("run %s: cannot check the simulator: %s", run.id, exc)
-                continue
-        if reason is not None:
-            stopped += lifecycle.request_stop(run, reason)
-    return stopped + _retry_failed_stops()
-
-
-def _retry_failed_stops() -> int:
-    """Start the stop job again for runs left `stopping` by a stop job that failed."""
-    retried = 0
-    for run in db.session.scalars(select(Run).where(Run.state == RunState.STOPPING)).all():
-        jobs = list(
-            db.session.scalars(
-                select(Job)
-                .where(Job.kind == "run.stop", Job.target_type == "run", Job.target_id == run.id)
-                .order_by(Job.created_at.desc())
-            )
-        )
-        if jobs and jobs[0].state == JobState.FAILED and len(jobs) < MAX_STOP_ATTEMPTS:
-            log.warning("run %s: stop job failed (%s); starting it again", run.id, jobs[0].error)
-            lifecycle.enqueue_stop(run)
-            retried += 1
-    return retried
-
-
-def follow(run: Run, config: Config) -> str | None:
-    """Read the live score from `sim`; return "ended" when the simulator has finished."""
-    folder = run_dir(run.id)
-    unit = shlex.quote(unit_name(run.id))
-    command = (
-        f"cat {shlex.quote(f'{folder}/{SCORE}')} 2>/dev/null; echo '#'; "
-        f"test -f {shlex.quote(f'{folder}/{FINAL}')} && echo final; "
-        f"systemctl is-active --quiet {unit} || echo inactive"
-    )
-    with machines(run, config) as reach:
-        output = reach.executor.run(reach.sim, command, timeout=30).stdout
-        if reach.router is not None:
-            _count_bits(run, reach)
-    lines, _, status = output.rpartition("#\n")
-    result = read_score_log(lines.splitlines())
-    run.score, run.falls, run.sim_seconds = result.score, result.falls, result.sim_seconds
-    db.session.flush()
-    return "ended" if ("final" in status or "inactive" in status) else None
-
-
-def _count_bits(run: Run, reach: Machines) -> None:
-    """Show the bits used so far (the bandwidth log gives the final figures at the end)."""
-    assert reach.router is not None
-    try:
-        counts = router_control.counters(reach.executor, reach.router)
-        used = payload_bits_used(counts)
-        spent = {d: _moment(when) for d, when in spent_at(counts).items()}
-    except (CloudSimError, KeyError, TypeError, ValueError) as exc:
-        # the run's end is still detected; only the live figure waits for the next beat
-        log.warning("run %s: cannot read the router's counters: %s", run.id, exc)
-        _router_fault(run, reach)
-        return
-    run.uplink_bits_used, run.downlink_bits_used = used["uplink"], used["downlink"]
-    run.uplink_spent_at = run.uplink_spent_at or spent["uplink"]
-    run.downlink_spent_at = run.downlink_spent_at or spent["downlink"]
-    _router_fault(run, reach)
-
-
-def _moment(text: str | None) -> datetime | None:
-    """Return csrouter's ISO 8601 time as a datetime (None stays None)."""
-    return datetime.fromisoformat(text) if text else None
-
-
-def _router_fault(run: Run, reach: Machines) -> None:
-    """Show on the run a fault of the router's csrouter (down: OCU traffic stopped), or clear it."""
-    assert reach.router is not None
-    try:
-        faults = list(router_control.status(reach.executor, reach.router).get("faults") or [])
-    except CloudSimError as exc:
-        faults = [str(exc)]
-    if faults:
-        run.error = ROUTER_FAULT + "; ".join(map(str, faults))
-        log.warning("run %s: %s", run.id, run.error)
-    elif run.error and run.error.startswith(ROUTER_FAULT):
-        run.error = None

@@ -52,8 +52,10 @@ def celery_init_app(app: Flask, config: Config) -> Celery:
 def schedule_task(app: Flask, task: str, every: timedelta) -> None:
     """Have Celery beat send `task` periodically."""
     celery: Celery = app.extensions["celery"]
-    # A new dict: Celery's default schedule object may be shared between apps.
+    # A new dict: Celery's default schedule object may be shared between apps. A message not
+    # started within one period is dropped: the next one is on its way, so busy workers never
+    # work through a backlog of the same periodic task.
     celery.conf.beat_schedule = {
         **celery.conf.beat_schedule,
-        task: {"task": task, "schedule": every},
+        task: {"task": task, "schedule": every, "options": {"expires": every.total_seconds()}},
     }

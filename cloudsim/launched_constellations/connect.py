@@ -6,15 +6,15 @@ from collections.abc import Iterable
 from dataclasses import replace
 
 from libcloud.compute.base import Node
-from sqlalchemy import update
+from sqlalchemy import select, update
 
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.keys import KeyPair
-from cloudsim.models import Constellation, Machine
+from cloudsim.models import Constellation, ConstellationState, Machine
 from cloudsim.providers.service import Provider, open_provider
 from provisioners.providers.base import BEHIND_PUBLIC_MACHINE
-from provisioners.remote.ssh import HostKeys, Route, SSHTarget
+from provisioners.remote.ssh import ConnectionCache, HostKeys, Route, SSHTarget, process_cache
 
 
 def machine_host_keys(constellation: Constellation) -> HostKeys:
@@ -80,3 +80,18 @@ def targets(constellation: Constellation, keys: KeyPair, config: Config) -> dict
     for name in routes:
         target(name)
     return result
+
+
+def forget_connections(constellation: Constellation, cache: ConnectionCache | None = None) -> int:
+    """Close this process's kept SSH connections to the constellation's machines."""
+    prefix = target_name(constellation, "")
+    return (cache or process_cache()).evict_where(lambda name: name.startswith(prefix))
+
+
+def forget_gone_connections(cache: ConnectionCache) -> int:
+    """Close kept connections to machines of constellations terminated (by any process)."""
+    gone = (ConstellationState.TERMINATING, ConstellationState.TERMINATED)
+    live = set(
+        db.session.scalars(select(Constellation.name).where(Constellation.state.not_in(gone)))
+    )
+    return cache.evict_where(lambda name: name.rsplit("/", 1)[0] not in live)

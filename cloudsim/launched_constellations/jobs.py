@@ -23,6 +23,7 @@ from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.launched_constellations import lifecycle
 from cloudsim.launched_constellations.access import TEAM_KINDS, team_keys
 from cloudsim.launched_constellations.connect import (
+    forget_connections,
     machine_host_keys,
     record_routes,
     targets,
@@ -329,6 +330,7 @@ def terminate_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     constellation = ctx.load(Constellation, job.constellation_id)
     config: Config = current_app.config["CLOUDSIM"]
     lifecycle.terminating(constellation)
+    forget_connections(constellation)  # other processes' beats forget them on their own
     ctx.stage("machines", 10)
     provider = open_provider(constellation.provider, config)
     driver = provider.driver

@@ -26,8 +26,9 @@ from cloudsim.competition.artifacts import (
     remote_sha256,
     run_dir,
 )
-from cloudsim.competition.jobs import ROUTER_FAULT, machines, supervise_runs
+from cloudsim.competition.jobs import ROUTER_FAULT, machines
 from cloudsim.competition.schedule import in_zone
+from cloudsim.competition.supervision import supervise_runs
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service as constellations

@@ -170,7 +170,7 @@ def test_the_tasks_page_offers_the_open_task_and_hides_later_ones(
 def test_the_beat_restarts_a_failed_stop_job_a_few_times_then_leaves_it(
     app: Flask, people: dict[str, User | None], team_a: Team, constellation: Constellation
 ) -> None:
-    from cloudsim.competition.jobs import MAX_STOP_ATTEMPTS, supervise_runs
+    from cloudsim.competition.supervision import MAX_STOP_ATTEMPTS, supervise_runs
     from cloudsim.models import JobState
 
     run = runs.start_run(people["user_a"], open_task(team_a.id).id)
@@ -191,7 +191,7 @@ def test_the_beat_restarts_a_failed_stop_job_a_few_times_then_leaves_it(
 def test_the_beat_stops_runs_at_the_end_of_the_window_and_past_the_timeout(
     app: Flask, people: dict[str, User | None], team_a: Team, constellation: Constellation
 ) -> None:
-    from cloudsim.competition.jobs import supervise_runs
+    from cloudsim.competition.supervision import supervise_runs
 
     task = open_task(team_a.id, timeout_s=60)
     run = runs.start_run(people["user_a"], task.id)

@@ -17,7 +17,7 @@ from flask import Flask
 from playwright.sync_api import Browser, expect
 
 from cloudsim.auth.policy import SYSTEM
-from cloudsim.competition.jobs import supervise_runs
+from cloudsim.competition.supervision import supervise_runs
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import router_control, service
