@@ -24,6 +24,7 @@ bench: install
 	$(BIN)/python -m bench.local_hosts
 	$(BIN)/python -m bench.router
 	$(BIN)/python -m bench.run_logs
+	$(BIN)/python -m bench.supervision
 	$(BIN)/python -m bench.viewer
 	$(BIN)/drcsim bench
 

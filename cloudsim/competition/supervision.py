@@ -131,7 +131,8 @@ class Supervisor:
         report.stopped += _retry_failed_stops()
         report.seconds = time.monotonic() - started
         report.connections = self.connections.stats()
-        log.info(
+        log.log(
+            logging.INFO if report.runs else logging.DEBUG,  # a line per beat while runs live
             "supervision: %d live runs, %d machines asked, %d answers, late %s, %.3f s, %s",
             report.runs, report.asked, report.answered, report.late or "none",
             report.seconds, report.connections,
@@ -159,8 +160,8 @@ class Supervisor:
         )
         try:
             if role == "sim":
-                return _ask_sim(executor, target, run_id)
-            return _ask_router(executor, target)
+                return ask_sim(executor, target, run_id)
+            return ask_router(executor, target)
         except (CloudSimError, SSHError):
             # a broken or silent connection is not handed out again: the next beat reconnects
             self.connections.evict(target)
@@ -193,7 +194,8 @@ def _roles(found: RunTargets) -> list[tuple[str, SSHTarget]]:
     return [("sim", found.sim)] + ([("router", found.router)] if found.router else [])
 
 
-def _ask_sim(executor: SSHExecutor, sim: SSHTarget, run_id: int) -> SimAnswer:
+def ask_sim(executor: SSHExecutor, sim: SSHTarget, run_id: int) -> SimAnswer:
+    """Read the run's score log on `sim`, and whether its simulator has ended."""
     folder = run_dir(run_id)
     unit = shlex.quote(unit_name(run_id))
     command = (
@@ -206,7 +208,8 @@ def _ask_sim(executor: SSHExecutor, sim: SSHTarget, run_id: int) -> SimAnswer:
     return SimAnswer(lines.splitlines(), "final" in status or "inactive" in status)
 
 
-def _ask_router(executor: SSHExecutor, router: SSHTarget) -> RouterAnswer:
+def ask_router(executor: SSHExecutor, router: SSHTarget) -> RouterAnswer:
+    """Read the router's counters and its daemon's faults (errors become faults)."""
     used: dict[str, int] | None = None
     spent: dict[str, datetime | None] = {}
     try:

@@ -1,0 +1,327 @@
+"""Benchmark the beat's supervision of live runs: 1, 10 and 30 runs, and one hung machine.
+
+Needs root. Thirty `vrc` constellations do not fit on this machine, so each run is
+lightweight: a minimal local host (its own namespace, filesystem and sshd) stands for both
+its sim and its router, which stay two machines on the run's constellation (two rows, two
+routes, two connections, the same three commands a beat sends in production). On the host a
+stand-in `systemctl` says the simulator is active, a stand-in `csrouter` prints counters and
+status as csrouter does, and the run folder holds a score log. Every figure comes from one
+process and one run of this script:
+
+- `connect per beat`: the path before kept connections (a new executor per run, runs one
+  after the other), 30 runs: the reference the new beat is compared with;
+- `cold` (the first beat: every connection made) and `steady` (median of the next beats,
+  connections kept) for 1, 10 and 30 runs;
+- 30 runs while one host is frozen (SIGSTOP: its sshd and sessions do not answer at all):
+  the beat ends after CLOUDSIM_RUN_PROBE_SECONDS with the other 29 runs answered.
+
+Usage: python -m bench.supervision [--runs 30] [--hosts 30] [--beats 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import os
+import shlex
+import shutil
+import signal
+import statistics
+import subprocess
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from datetime import timedelta
+from pathlib import Path
+
+from libcloud.compute.base import Node, NodeAuthSSHKey
+from sqlalchemy import select
+
+from cloudsim.app import create_app
+from cloudsim.competition.artifacts import run_dir
+from cloudsim.competition.jobs import machines
+from cloudsim.competition.supervision import BeatReport, Supervisor, ask_router, ask_sim
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.launched_constellations.keys import (
+    SSH_KEY_NAME,
+    KeyPair,
+    constellation_secret,
+    generate_keypair,
+)
+from cloudsim.models import (
+    Constellation,
+    ConstellationState,
+    Machine,
+    Run,
+    RunState,
+    SecretKind,
+    Task,
+    Team,
+    utcnow,
+)
+from constellations.plans.router import CSROUTER_COMMAND
+from provisioners.providers.local import netns
+from provisioners.providers.local.driver import LocalNodeDriver
+from provisioners.remote.ssh import ConnectionCache, HostKeys, SSHExecutor, SSHTarget
+from tests.support.servers import RedisServer
+
+PREFIX = "csbeatb"
+SCORE_LOG = '{"event": "run_start", "score": 0, "sim_time": 0.0, "wall_time": 1795337764.0}\n'
+SYSTEMCTL = "#!/bin/sh\nexit 0\n"
+CSROUTER = """#!/bin/sh
+case "$1" in
+counters) echo '{"uplink": {"accepted": {"payload_bytes": 1000}, "spent_at": null},\
+ "downlink": {"accepted": {"payload_bytes": 2000}, "spent_at": null}}' ;;
+status) echo '{"faults": []}' ;;
+esac
+"""
+
+
+@dataclass(frozen=True)
+class Host:
+    """A minimal local host and the key that logs in to it."""
+
+    node: Node
+    keys: KeyPair
+    route: dict[str, object]
+
+
+def main() -> None:
+    if os.geteuid() != 0:
+        raise SystemExit("bench/supervision.py needs root (local hosts are namespaces)")
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=30, help="most live runs measured")
+    parser.add_argument("--hosts", type=int, default=30, help="local hosts (runs share them)")
+    parser.add_argument("--beats", type=int, default=5, help="steady beats per figure")
+    args = parser.parse_args()
+    print(f"load before: {_uptime()}")
+    scratch = Path(tempfile.mkdtemp(prefix=f"{PREFIX}-"))
+    redis = RedisServer(scratch / "redis")
+    driver = LocalNodeDriver(
+        state_dir=str(scratch / "state"),
+        prefix=PREFIX,
+        subnet_pool="10.232.0.0/16",
+        public_cidr="198.18.32.0/24",
+    )
+    config = Config.from_env(
+        {
+            "CLOUDSIM_INSTANCE_DIR": str(scratch / "instance"),
+            "CLOUDSIM_REDIS_URL": redis.url(),
+            "CLOUDSIM_LOG_LEVEL": "WARNING",
+        }
+    )
+    app = create_app(config)
+    try:
+        started = time.monotonic()
+        hosts = _boot(driver, min(args.hosts, args.runs))
+        print(f"{len(hosts)} minimal hosts up in {time.monotonic() - started:.1f} s")
+        with app.app_context():
+            db.create_all()
+            _bench(config, hosts, args.runs, args.beats)
+    finally:
+        for node in driver.list_nodes():
+            driver.destroy_node(node)
+        for network in driver.ex_list_networks():
+            driver.ex_destroy_network(network)
+        redis.stop()
+        shutil.rmtree(scratch)
+    print(f"load after: {_uptime()}")
+
+
+def _boot(driver: LocalNodeDriver, count: int) -> list[Host]:
+    lan = driver.ex_create_network(f"{PREFIX}-lan")
+
+    def boot(index: int) -> Host:
+        keys = generate_keypair(f"host{index}")
+        node = driver.create_node(
+            f"h{index}", auth=NodeAuthSSHKey(keys.public), ex_network=lan, ex_init="minimal"
+        )
+        host = Host(node, keys, driver.ex_ssh_route(node).to_json())
+        stand_ins = (
+            f"printf '%s' {shlex.quote(SYSTEMCTL)} > /usr/local/bin/systemctl"
+            f" && printf '%s' {shlex.quote(CSROUTER)} > {CSROUTER_COMMAND}"
+            f" && chmod +x /usr/local/bin/systemctl {CSROUTER_COMMAND}"
+        )
+        with SSHExecutor(HostKeys()) as executor:
+            executor.run(_setup_target(host), stand_ins)
+        return host
+
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        return list(pool.map(boot, range(count)))
+
+
+def _setup_target(host: Host) -> SSHTarget:
+    proxy = host.route["proxy_command"]
+    assert isinstance(proxy, list)
+    return SSHTarget(
+        name="setup",
+        host=host.node.private_ips[0],
+        private_key=host.keys.private,
+        proxy_command=proxy,
+    )
+
+
+def _bench(config: Config, hosts: list[Host], most: int, beats: int) -> None:
+    sizes = sorted({1, min(10, most), most})
+    figures: dict[str, float] = {}
+    for size in sizes:
+        _live_runs(hosts, size)
+        if size == most:
+            figures["old"] = _median([_old_beat(config) for _ in range(beats)])
+        cold, steady, report = _new_beats(config, beats)
+        figures[f"cold {size}"], figures[f"steady {size}"] = cold, steady
+        print(
+            f"{size:3d} runs ({report.asked} machines): first beat {cold * 1000:7.1f} ms,"
+            f" steady beat {steady * 1000:7.1f} ms (median of {beats});"
+            f" {report.connections}"
+        )
+    old = figures["old"]
+    print(f"{most:3d} runs, connect per beat, one run after another: {old * 1000:7.1f} ms")
+    slow = _frozen_beat(config, hosts[0])
+    print(
+        f"{most:3d} runs, one host frozen: beat {slow.seconds * 1000:7.1f} ms"
+        f" (CLOUDSIM_RUN_PROBE_SECONDS={config.run_probe_seconds}),"
+        f" {slow.answered} machines answered on time, late runs {slow.late}"
+    )
+    one, many, cold = figures["steady 1"], figures[f"steady {most}"], figures[f"cold {most}"]
+    print("ratios:")
+    print(f"  steady beat, {most} runs / 1 run:                 {many / one:6.2f}")
+    print(f"  connect per beat / kept connections, {most} runs: {old / many:6.2f}")
+    print(f"  first beat / steady beat, {most} runs:            {cold / many:6.2f}")
+    print(f"  one host frozen / steady beat, {most} runs:       {slow.seconds / many:6.2f}")
+
+
+def _frozen_beat(config: Config, frozen: Host) -> BeatReport:
+    """Time a beat while one host answers nothing (connections were made before)."""
+    cache = ConnectionCache()
+    supervisor = Supervisor(cache)
+    try:
+        supervisor.beat(config)
+        db.session.commit()
+        _signal(frozen, signal.SIGSTOP)
+        try:
+            report = supervisor.beat(config)
+            db.session.commit()
+        finally:
+            _signal(frozen, signal.SIGCONT)
+        return report
+    finally:
+        supervisor.close()
+        cache.clear()
+
+
+def _live_runs(hosts: list[Host], count: int) -> None:
+    """Leave exactly `count` running runs, each on its own constellation (sim and router)."""
+    for run in db.session.scalars(select(Run)):
+        db.session.delete(run)
+    db.session.flush()
+    for index in range(count):
+        host = hosts[index % len(hosts)]
+        team = Team(name=f"Team {count}-{index}")
+        db.session.add(team)
+        db.session.flush()
+        constellation = Constellation(
+            name=f"c{count}-{index}",
+            kind="vrc",
+            provider="local",
+            team_id=team.id,
+            state=ConstellationState.READY,
+        )
+        db.session.add(constellation)
+        db.session.flush()
+        constellation_secret(
+            constellation,
+            SSH_KEY_NAME,
+            SecretKind.SSH_PRIVATE_KEY,
+            functools.partial(str, host.keys.private),
+        )
+        for role in ("sim", "router"):
+            db.session.add(
+                Machine(
+                    constellation_id=constellation.id,
+                    name=role,
+                    role=role,
+                    private_ip=host.node.private_ips[0],
+                    ssh_route=host.route,
+                )
+            )
+        now = utcnow()
+        task = Task(
+            team_id=team.id,
+            name=f"Task {count}-{index}",
+            world="vrc_task_2",
+            run_config=1,
+            window_start=now - timedelta(minutes=1),
+            window_stop=now + timedelta(hours=1),
+            uplink_bits=1_000_000,
+            downlink_bits=8_000_000,
+        )
+        db.session.add(task)
+        db.session.flush()
+        run = Run(
+            task_id=task.id,
+            team_id=team.id,
+            constellation_id=constellation.id,
+            active_constellation_id=constellation.id,
+            state=RunState.RUNNING,
+            running_at=now,
+        )
+        db.session.add(run)
+        db.session.flush()
+        folder = run_dir(run.id)
+        with SSHExecutor(HostKeys()) as executor:
+            executor.run(
+                _setup_target(host),
+                f"mkdir -p {folder} && printf '%s' {shlex.quote(SCORE_LOG)} > {folder}/score.jsonl",
+            )
+    db.session.commit()
+
+
+def _new_beats(config: Config, beats: int) -> tuple[float, float, BeatReport]:
+    cache = ConnectionCache()
+    supervisor = Supervisor(cache)
+    try:
+        first = supervisor.beat(config)
+        db.session.commit()
+        steady = []
+        for _ in range(beats):
+            report = supervisor.beat(config)
+            db.session.commit()
+            if report.late or report.failed:
+                raise SystemExit(f"a beat did not hear from every machine: {report}")
+            steady.append(report.seconds)
+        return first.seconds, _median(steady), report
+    finally:
+        supervisor.close()
+        cache.clear()
+
+
+def _old_beat(config: Config) -> float:
+    """Time the path before kept connections: per run a new executor, sim then router."""
+    started = time.monotonic()
+    for run in db.session.scalars(select(Run).where(Run.state == RunState.RUNNING)):
+        with machines(run, config) as reach:
+            ask_sim(reach.executor, reach.sim, run.id)
+            assert reach.router is not None
+            ask_router(reach.executor, reach.router)
+    db.session.commit()
+    return time.monotonic() - started
+
+
+def _signal(host: Host, signum: signal.Signals) -> None:
+    for pid in netns.namespace_pids(host.node.extra["netns"]):
+        os.kill(pid, signum)
+
+
+def _median(values: list[float]) -> float:
+    return statistics.median(values)
+
+
+def _uptime() -> str:
+    return subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
+
+
+if __name__ == "__main__":
+    main()
