@@ -1,11 +1,12 @@
 """Benchmark the beat's supervision of live runs: 1, 10 and 30 runs, and one hung machine.
 
 Needs root. Thirty `vrc` constellations do not fit on this machine, so each run is
-lightweight: a minimal local host (its own namespace, filesystem and sshd) stands for both
-its sim and its router, which stay two machines on the run's constellation (two rows, two
-routes, two connections, the same three commands a beat sends in production). On the host a
-stand-in `systemctl` says the simulator is active, a stand-in `csrouter` prints counters and
-status as csrouter does, and the run folder holds a score log. Every figure comes from one
+lightweight (`tests/support/lightweight_runs.py`): a minimal local host (its own namespace,
+filesystem and sshd) stands for both its sim and its router, which stay two machines on the
+run's constellation (two rows, two routes, two connections, the same three commands a beat
+sends in production). On the host a stand-in `systemctl` says the simulator is active, a
+stand-in `csrouter` prints counters and status as csrouter does, and the run folder holds a
+score log. With fewer `--hosts` than runs, runs share hosts. Every figure comes from one
 process and one run of this script:
 
 - `connect per beat`: the path before kept connections (a new executor per run, runs one
@@ -21,71 +22,29 @@ Usage: python -m bench.supervision [--runs 30] [--hosts 30] [--beats 5]
 from __future__ import annotations
 
 import argparse
-import functools
 import os
-import shlex
 import shutil
 import signal
 import statistics
 import subprocess
 import tempfile
 import time
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
-from datetime import timedelta
 from pathlib import Path
 
-from libcloud.compute.base import Node, NodeAuthSSHKey
 from sqlalchemy import select
 
 from cloudsim.app import create_app
-from cloudsim.competition.artifacts import run_dir
 from cloudsim.competition.jobs import machines
 from cloudsim.competition.supervision import BeatReport, Supervisor, ask_router, ask_sim
 from cloudsim.config import Config
 from cloudsim.extensions import db
-from cloudsim.launched_constellations.keys import (
-    SSH_KEY_NAME,
-    KeyPair,
-    constellation_secret,
-    generate_keypair,
-)
-from cloudsim.models import (
-    Constellation,
-    ConstellationState,
-    Machine,
-    Run,
-    RunState,
-    SecretKind,
-    Task,
-    Team,
-    utcnow,
-)
-from constellations.plans.router import CSROUTER_COMMAND
-from provisioners.providers.local import netns
+from cloudsim.models import Run, RunState, Team
 from provisioners.providers.local.driver import LocalNodeDriver
-from provisioners.remote.ssh import ConnectionCache, HostKeys, SSHExecutor, SSHTarget
+from provisioners.remote.ssh import ConnectionCache
+from tests.support.lightweight_runs import Host, boot_hosts, live_run
 from tests.support.servers import RedisServer
 
 PREFIX = "csbeatb"
-SCORE_LOG = '{"event": "run_start", "score": 0, "sim_time": 0.0, "wall_time": 1795337764.0}\n'
-SYSTEMCTL = "#!/bin/sh\nexit 0\n"
-CSROUTER = """#!/bin/sh
-case "$1" in
-counters) echo '{"uplink": {"accepted": {"payload_bytes": 1000}, "spent_at": null},\
- "downlink": {"accepted": {"payload_bytes": 2000}, "spent_at": null}}' ;;
-status) echo '{"faults": []}' ;;
-esac
-"""
-
-
-@dataclass(frozen=True)
-class Host:
-    """A minimal local host and the key that logs in to it."""
-
-    node: Node
-    keys: KeyPair
-    route: dict[str, object]
 
 
 def main() -> None:
@@ -115,7 +74,8 @@ def main() -> None:
     app = create_app(config)
     try:
         started = time.monotonic()
-        hosts = _boot(driver, min(args.hosts, args.runs))
+        names = [f"h{index}" for index in range(min(args.hosts, args.runs))]
+        hosts = boot_hosts(driver, f"{PREFIX}-lan", names)
         print(f"{len(hosts)} minimal hosts up in {time.monotonic() - started:.1f} s")
         with app.app_context():
             db.create_all()
@@ -130,46 +90,13 @@ def main() -> None:
     print(f"load after: {_uptime()}")
 
 
-def _boot(driver: LocalNodeDriver, count: int) -> list[Host]:
-    lan = driver.ex_create_network(f"{PREFIX}-lan")
-
-    def boot(index: int) -> Host:
-        keys = generate_keypair(f"host{index}")
-        node = driver.create_node(
-            f"h{index}", auth=NodeAuthSSHKey(keys.public), ex_network=lan, ex_init="minimal"
-        )
-        host = Host(node, keys, driver.ex_ssh_route(node).to_json())
-        stand_ins = (
-            f"printf '%s' {shlex.quote(SYSTEMCTL)} > /usr/local/bin/systemctl"
-            f" && printf '%s' {shlex.quote(CSROUTER)} > {CSROUTER_COMMAND}"
-            f" && chmod +x /usr/local/bin/systemctl {CSROUTER_COMMAND}"
-        )
-        with SSHExecutor(HostKeys()) as executor:
-            executor.run(_setup_target(host), stand_ins)
-        return host
-
-    with ThreadPoolExecutor(max_workers=8) as pool:
-        return list(pool.map(boot, range(count)))
-
-
-def _setup_target(host: Host) -> SSHTarget:
-    proxy = host.route["proxy_command"]
-    assert isinstance(proxy, list)
-    return SSHTarget(
-        name="setup",
-        host=host.node.private_ips[0],
-        private_key=host.keys.private,
-        proxy_command=proxy,
-    )
-
-
 def _bench(config: Config, hosts: list[Host], most: int, beats: int) -> None:
     sizes = sorted({1, min(10, most), most})
     figures: dict[str, float] = {}
     for size in sizes:
         _live_runs(hosts, size)
         if size == most:
-            figures["old"] = _median([_old_beat(config) for _ in range(beats)])
+            figures["old"] = statistics.median([_old_beat(config) for _ in range(beats)])
         cold, steady, report = _new_beats(config, beats)
         figures[f"cold {size}"], figures[f"steady {size}"] = cold, steady
         print(
@@ -200,12 +127,12 @@ def _frozen_beat(config: Config, frozen: Host) -> BeatReport:
     try:
         supervisor.beat(config)
         db.session.commit()
-        _signal(frozen, signal.SIGSTOP)
+        frozen.signal(signal.SIGSTOP)
         try:
             report = supervisor.beat(config)
             db.session.commit()
         finally:
-            _signal(frozen, signal.SIGCONT)
+            frozen.signal(signal.SIGCONT)
         return report
     finally:
         supervisor.close()
@@ -216,67 +143,12 @@ def _live_runs(hosts: list[Host], count: int) -> None:
     """Leave exactly `count` running runs, each on its own constellation (sim and router)."""
     for run in db.session.scalars(select(Run)):
         db.session.delete(run)
-    db.session.flush()
+    db.session.commit()
     for index in range(count):
-        host = hosts[index % len(hosts)]
         team = Team(name=f"Team {count}-{index}")
         db.session.add(team)
         db.session.flush()
-        constellation = Constellation(
-            name=f"c{count}-{index}",
-            kind="vrc",
-            provider="local",
-            team_id=team.id,
-            state=ConstellationState.READY,
-        )
-        db.session.add(constellation)
-        db.session.flush()
-        constellation_secret(
-            constellation,
-            SSH_KEY_NAME,
-            SecretKind.SSH_PRIVATE_KEY,
-            functools.partial(str, host.keys.private),
-        )
-        for role in ("sim", "router"):
-            db.session.add(
-                Machine(
-                    constellation_id=constellation.id,
-                    name=role,
-                    role=role,
-                    private_ip=host.node.private_ips[0],
-                    ssh_route=host.route,
-                )
-            )
-        now = utcnow()
-        task = Task(
-            team_id=team.id,
-            name=f"Task {count}-{index}",
-            world="vrc_task_2",
-            run_config=1,
-            window_start=now - timedelta(minutes=1),
-            window_stop=now + timedelta(hours=1),
-            uplink_bits=1_000_000,
-            downlink_bits=8_000_000,
-        )
-        db.session.add(task)
-        db.session.flush()
-        run = Run(
-            task_id=task.id,
-            team_id=team.id,
-            constellation_id=constellation.id,
-            active_constellation_id=constellation.id,
-            state=RunState.RUNNING,
-            running_at=now,
-        )
-        db.session.add(run)
-        db.session.flush()
-        folder = run_dir(run.id)
-        with SSHExecutor(HostKeys()) as executor:
-            executor.run(
-                _setup_target(host),
-                f"mkdir -p {folder} && printf '%s' {shlex.quote(SCORE_LOG)} > {folder}/score.jsonl",
-            )
-    db.session.commit()
+        live_run(team.id, f"c{count}-{index}", hosts[index % len(hosts)], ("sim", "router"))
 
 
 def _new_beats(config: Config, beats: int) -> tuple[float, float, BeatReport]:
@@ -292,7 +164,7 @@ def _new_beats(config: Config, beats: int) -> tuple[float, float, BeatReport]:
             if report.late or report.failed:
                 raise SystemExit(f"a beat did not hear from every machine: {report}")
             steady.append(report.seconds)
-        return first.seconds, _median(steady), report
+        return first.seconds, statistics.median(steady), report
     finally:
         supervisor.close()
         cache.clear()
@@ -308,15 +180,6 @@ def _old_beat(config: Config) -> float:
             ask_router(reach.executor, reach.router)
     db.session.commit()
     return time.monotonic() - started
-
-
-def _signal(host: Host, signum: signal.Signals) -> None:
-    for pid in netns.namespace_pids(host.node.extra["netns"]):
-        os.kill(pid, signum)
-
-
-def _median(values: list[float]) -> float:
-    return statistics.median(values)
 
 
 def _uptime() -> str:

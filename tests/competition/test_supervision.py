@@ -8,53 +8,25 @@ import signal
 import tempfile
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 from flask import Flask
-from libcloud.compute.base import Node, NodeAuthSSHKey
 
-from cloudsim.competition import runs
 from cloudsim.competition.artifacts import run_dir
 from cloudsim.competition.supervision import BeatReport, Supervisor
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.connect import forget_connections
-from cloudsim.launched_constellations.keys import (
-    SSH_KEY_NAME,
-    KeyPair,
-    constellation_secret,
-    generate_keypair,
-)
-from cloudsim.models import (
-    Constellation,
-    ConstellationState,
-    Machine,
-    Run,
-    RunState,
-    SecretKind,
-    Team,
-    User,
-)
+from cloudsim.models import ConstellationState, RunState, Team
 from provisioners.providers.local import netns
 from provisioners.providers.local.driver import LocalNodeDriver
-from provisioners.remote.ssh import ConnectionCache, HostKeys, SSHExecutor, SSHTarget
-from tests.competition.support import SCORE_LOG, open_task
+from provisioners.remote.ssh import ConnectionCache
+from tests.support.lightweight_runs import Host, boot_hosts, live_run
 
 pytestmark = pytest.mark.hosts
 PREFIX = "csbeat"
-# what the sim's `systemctl is-active` says while the simulator runs (hosts have no systemd)
-ACTIVE = "#!/bin/sh\nexit 0\n"
-
-
-@dataclass(frozen=True)
-class Host:
-    """A local host standing for one constellation's sim, and the key that logs in to it."""
-
-    node: Node
-    keys: KeyPair
-    route: dict[str, object]
 
 
 @pytest.fixture(scope="module")
@@ -70,15 +42,8 @@ def hosts() -> Iterator[dict[str, Host]]:
         public_cidr="198.18.31.0/24",
     )
     try:
-        lan = driver.ex_create_network(f"{PREFIX}-lan")
-        made = {}
-        for name in ("slow", "quick"):
-            keys = generate_keypair(name)
-            node = driver.create_node(
-                name, auth=NodeAuthSSHKey(keys.public), ex_network=lan, ex_init="minimal"
-            )
-            made[name] = Host(node, keys, driver.ex_ssh_route(node).to_json())
-        yield made
+        slow, quick = boot_hosts(driver, f"{PREFIX}-lan", ["slow", "quick"])
+        yield {"slow": slow, "quick": quick}
     finally:
         for node in driver.list_nodes():
             driver.destroy_node(node)
@@ -88,60 +53,11 @@ def hosts() -> Iterator[dict[str, Host]]:
     assert netns.list_namespaces(f"{PREFIX}-") == []
 
 
-def live_run(user: User, team: Team, name: str, host: Host) -> Run:
-    """Give the team a ready constellation whose sim is the host, and a running run on it."""
-    constellation = Constellation(
-        name=name, kind="vrc", provider="local", team_id=team.id, state=ConstellationState.READY
-    )
-    db.session.add(constellation)
-    db.session.flush()
-    constellation_secret(
-        constellation, SSH_KEY_NAME, SecretKind.SSH_PRIVATE_KEY, lambda: host.keys.private
-    )
-    db.session.add(
-        Machine(
-            constellation_id=constellation.id,
-            name="sim",
-            role="sim",
-            private_ip=host.node.private_ips[0],
-            ssh_route=host.route,
-        )
-    )
-    db.session.commit()
-    run = runs.start_run(user, open_task(team.id).id)
-    run.state = RunState.RUNNING
-    db.session.commit()
-    return run
-
-
-def on_sim(host: Host, command: str) -> None:
-    """Run a command on the host with a connection of the test's own."""
-    target = SSHTarget(name="setup", host="", private_key=host.keys.private)
-    route = host.route["proxy_command"]
-    assert isinstance(route, list)
-    target = replace(target, host=str(host.node.private_ips[0]), proxy_command=route)
-    with SSHExecutor(HostKeys()) as executor:
-        executor.run(target, command)
-
-
-def signal_host(host: Host, signum: signal.Signals) -> None:
-    """Send a signal to every process of the host (sshd, its sessions, our proxies into it)."""
-    for pid in netns.namespace_pids(host.node.extra["netns"]):
-        os.kill(pid, signum)
-
-
 def test_a_beat_keeps_connections_and_a_hung_machine_delays_no_other_run(
-    app: Flask, people: dict[str, User | None], team_a: Team, team_b: Team, hosts: dict[str, Host]
+    app: Flask, team_a: Team, team_b: Team, hosts: dict[str, Host]
 ) -> None:
-    slow = live_run(people["user_a"], team_a, "a-beat", hosts["slow"])  # type: ignore[arg-type]
-    quick = live_run(people["user_b"], team_b, "b-beat", hosts["quick"])  # type: ignore[arg-type]
-    for run, host in ((slow, hosts["slow"]), (quick, hosts["quick"])):
-        folder = run_dir(run.id)
-        on_sim(
-            host,
-            f"printf '{ACTIVE}' > /usr/local/bin/systemctl && chmod +x /usr/local/bin/systemctl"
-            f" && mkdir -p {folder} && printf '%s' '{SCORE_LOG}' > {folder}/score.jsonl",
-        )
+    slow = live_run(team_a.id, "a-beat", hosts["slow"])
+    quick = live_run(team_b.id, "b-beat", hosts["quick"])
     config = replace(app.config["CLOUDSIM"], run_probe_seconds=2)
     cache = ConnectionCache()
     supervisor = Supervisor(cache)
@@ -153,16 +69,16 @@ def test_a_beat_keeps_connections_and_a_hung_machine_delays_no_other_run(
         assert (second.asked, second.answered) == (2, 2)
         assert cache.stats().opened == 2 and cache.stats().reused >= 2
 
-        signal_host(hosts["slow"], signal.SIGSTOP)
+        hosts["slow"].signal(signal.SIGSTOP)
         try:
-            on_sim(hosts["quick"], f"touch {run_dir(quick.id)}/final.json")
+            hosts["quick"].run(f"touch {run_dir(quick.id)}/final.json")
             hung = beat(supervisor, config)
             # the quick run's end is acted on in the very beat the slow machine misses
             assert hung.late == [slow.id] and hung.stopped == 1
             assert (quick.state, quick.stop_reason) == (RunState.STOPPING, "ended")
             assert slow.state == RunState.RUNNING
         finally:
-            signal_host(hosts["slow"], signal.SIGCONT)
+            hosts["slow"].signal(signal.SIGCONT)
         after = await_answer(supervisor, config, slow.id)
         assert slow.state == RunState.RUNNING and slow.score == 1 and after.late == []
         assert cache.stats().opened == 3  # the silent connection was replaced, once
