@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import random
 import re
 import signal
 import socket
@@ -199,8 +200,11 @@ def drive(
         api = requests.Session()
         api.headers.update(me.headers)
         anonymous = requests.Session()
+        # Clients in lockstep would all wait behind the same heavy request: each its own order.
+        order = random.Random(number)
         for _ in range(rounds):
             batch = [*me.requests, (f"reference GET {REFERENCE} (anonymous)", REFERENCE)]
+            order.shuffle(batch)
             for name, url in batch:
                 http = api if url.startswith("/api/") else session
                 http = anonymous if url == REFERENCE else http
@@ -325,6 +329,10 @@ def report(
         f"workers; load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}"
     )
     print(f"seeded in {seeding:.0f} s: {what}")
+    print(
+        f"{clients} clients that never pause: mean latency = clients / rate = "
+        f"{1000 * clients / (total / wall):.0f} ms (Little's law), whatever a page costs"
+    )
 
     def p95(values: list[float]) -> float:
         return sorted(values)[int(0.95 * (len(values) - 1))] * 1000
