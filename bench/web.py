@@ -128,6 +128,7 @@ def season_visitors(app: Flask) -> dict[str, Visitor]:
         member = db.session.scalar(
             select(User).where(User.team_id == team.id).order_by(User.id).limit(1)
         )
+        assert member is not None
         emails = {
             "admin": "admin@example.org",
             "officer": "officer0@example.org",
@@ -136,6 +137,7 @@ def season_visitors(app: Flask) -> dict[str, Visitor]:
         visitors = {}
         for kind, email in emails.items():
             user = db.session.scalar(select(User).where(User.email == email))
+            assert user is not None
             column = PERSONAS.index(MATRIX_PERSONA[kind])
             visitors[kind] = Visitor(
                 email,

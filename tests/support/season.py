@@ -13,8 +13,9 @@ import json
 import tempfile
 import uuid
 from collections.abc import Iterable, Sequence
-from datetime import timedelta
+from datetime import datetime, timedelta
 from pathlib import Path
+from typing import Any
 
 from flask import Flask, url_for
 from sqlalchemy import select
@@ -161,7 +162,7 @@ def _jobs(team: Team, count: int) -> list[Job]:
     ]
 
 
-def _task(team: Team, start: object, stop: object) -> Task:
+def _task(team: Team, start: datetime, stop: datetime) -> Task:
     task = Task(
         team_id=team.id,
         name=f"Task {next(_serial)}",
@@ -177,9 +178,9 @@ def _task(team: Team, start: object, stop: object) -> Task:
 
 
 def _add_run(
-    store: LogStore, team: Team, start: object, events: int, score: Path, bandwidth: Path
+    store: LogStore, team: Team, start: datetime, events: int, score: Path, bandwidth: Path
 ) -> None:
-    task = _task(team, start, start + timedelta(hours=1))  # type: ignore[operator]
+    task = _task(team, start, start + timedelta(hours=1))
     db.session.flush()
     run = Run(
         task_id=task.id,
@@ -191,14 +192,14 @@ def _add_run(
         downlink_bits_used=8_000_000,
         end_reason="time_limit",
         started_at=start,
-        finished_at=start + timedelta(minutes=30),  # type: ignore[operator]
+        finished_at=start + timedelta(minutes=30),
     )
     run.score_events = [
         ScoreEvent(
             checkpoint=n + 1,
             points=1,
             sim_time=float(10 * (n + 1)),
-            wall_time=start + timedelta(seconds=10 * (n + 1)),  # type: ignore[operator]
+            wall_time=start + timedelta(seconds=10 * (n + 1)),
             description=f"checkpoint {n + 1}",
         )
         for n in range(events)
@@ -271,7 +272,7 @@ def team_urls(app: Flask, team_id: int, endpoints: Iterable[str]) -> dict[str, s
         select(Run).where(Run.team_id == team_id).order_by(Run.id.desc()).limit(1)
     )
     assert run is not None, "the team has no run: seed a season first"
-    ids = {
+    ids: dict[str, Any] = {
         "team_id": team_id,
         "user_id": db.session.scalar(select(User.id).where(User.team_id == team_id).limit(1)),
         "job_id": db.session.scalar(select(Job.id).where(Job.team_id == team_id).limit(1)),
