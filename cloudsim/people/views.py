@@ -15,8 +15,10 @@ from cloudsim.extensions import db
 from cloudsim.models import Constellation, Role
 from cloudsim.people import service
 from cloudsim.people.forms import TeamForm, UserForm
+from cloudsim.web.inputs import query_int
 
 bp = Blueprint("people", __name__)
+USERS_PAGE = 100  # a season has hundreds of users: the Users page shows them a page at a time
 
 
 @bp.route("/teams")
@@ -99,7 +101,13 @@ def _user_form(**data: object) -> UserForm:
 @bp.route("/users")
 @role_required(Role.OFFICER)
 def users() -> ResponseReturnValue:
-    return render_template("people/users.html", users=service.visible_users(current_user))
+    page = db.paginate(
+        service.users_query(current_user),
+        page=query_int("page", 1, minimum=1),
+        per_page=USERS_PAGE,
+        error_out=False,
+    )
+    return render_template("people/users.html", page=page, users=page.items)
 
 
 @bp.route("/users/new", methods=["GET", "POST"])

@@ -1,5 +1,6 @@
-"""`GET /api/v1/users` is paged as the README says of every list: `?page=&page_size=`, the
-paging in an `X-Pagination` header; walking the pages lists every user exactly once."""
+"""Users are listed a page at a time as the README says: `GET /api/v1/users` with
+`?page=&page_size=` and the paging in an `X-Pagination` header, the Users page with its
+**Next →** link; walking the pages lists every user exactly once, by e-mail."""
 
 from __future__ import annotations
 
@@ -9,7 +10,8 @@ from flask import Flask
 
 from cloudsim.extensions import db
 from cloudsim.models import Role, User
-from tests.conftest import make_user, token_for
+from tests.competition.test_paged_pages import follow
+from tests.conftest import log_in, make_user, token_for
 from tests.support.season import new_teams
 
 
@@ -36,3 +38,18 @@ def test_users_list_walks_page_by_page(app: Flask) -> None:
         page = json.loads(answer.headers["X-Pagination"]).get("next_page")
     assert len(seen) == len(set(seen)) == 131
     assert seen == sorted(seen)  # by e-mail
+
+
+def test_users_page_walks_page_by_page(app: Flask) -> None:
+    team = new_teams(1)[0]
+    db.session.add_all(
+        User(email=f"listed{n:03d}@example.org", team_id=team.id, password_hash="x")
+        for n in range(130)
+    )
+    db.session.commit()
+    client = app.test_client()
+    log_in(client, make_user(Role.OFFICER))
+    pages = follow(client, "/users", "Next →", r'<tr><td><a href="/users/\d+">([^<]+)</a>')
+    assert [len(page) for page in pages] == [100, 31]
+    emails = [email for page in pages for email in page]
+    assert len(set(emails)) == 131 and emails == sorted(emails)
