@@ -308,10 +308,22 @@ def measure(label: str, database_url: str | None, clients: int, rounds: int) -> 
     kinds = [visitors[KINDS[n % 3]] for n in range(clients)]
     with stack(env, instance) as base:
         queries = count_queries(app, visitors)
-        started = time.perf_counter()
+        started, machine, own = time.perf_counter(), busy_cpu_seconds(), time.process_time()
         timings = drive(base, {}, clients, rounds, lambda number: kinds[number])
         wall = time.perf_counter() - started
+        machine, own = busy_cpu_seconds() - machine, time.process_time() - own
     report(label, seeded(app), seeding, timings, queries, wall, clients)
+    print(
+        f"CPU while driving: the machine's {os.cpu_count()} cores {machine / wall:.2f} cores busy "
+        f"(everything, other users included), the clients' own process {own / wall:.2f} cores"
+    )
+
+
+def busy_cpu_seconds() -> float:
+    """Return the CPU seconds all cores have been busy since boot (/proc/stat)."""
+    fields = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:9]]
+    idle = fields[3] + fields[4]  # idle and iowait
+    return (sum(fields) - idle) / os.sysconf("SC_CLK_TCK")
 
 
 def report(
