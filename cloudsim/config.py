@@ -128,9 +128,9 @@ SETTINGS: dict[str, Setting] = {
         "120", "Wall seconds past a run's timeout after which CloudSim stops it regardless"
     ),
     "CLOUDSIM_RUN_PROBE_SECONDS": Setting(
-        "10",
-        "How long a supervision beat waits for a machine's answer; a slower one is reported late,"
-        " the others do not wait",
+        "4",
+        "How long a supervision beat waits for the machines' answers; a slower machine is reported"
+        " late and its answer applied by a later beat",
     ),
     "CLOUDSIM_SSH_CONNECTIONS": Setting(
         "256", "SSH connections a worker process keeps open between beats (oldest closed first)"

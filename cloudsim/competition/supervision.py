@@ -4,8 +4,9 @@ A worker process keeps one SSH connection per machine between beats (the SSH exe
 process cache) and a pool of threads. A beat asks every live run's sim (its score log, whether
 the simulator still runs) and router (bits used, faults) at once, waits for the answers at most
 `CLOUDSIM_RUN_PROBE_SECONDS`, and applies what came back. A machine that has not answered by
-then is reported late: its question stays out (it is not asked again meanwhile) and the beat
-that finds its answer applies it, so a slow or hung machine never delays the other runs.
+then is reported late: its question stays out (it is not asked again meanwhile, and may take
+up to COMMAND_SECONDS there) and the beat that finds its answer applies it, so a slow or hung
+machine never delays the other runs.
 """
 
 from __future__ import annotations
@@ -47,8 +48,9 @@ log = logging.getLogger(__name__)
 MAX_STOP_ATTEMPTS = 3
 # machines one worker process asks at once; with more live machines the rest wait their turn
 PROBE_THREADS = 32
-# one connect attempt (TCP, banner, authentication) never takes longer than this
-ATTEMPT_SECONDS = 10.0
+# how long a question may take on the machine, and reaching it (a late answer still counts)
+COMMAND_SECONDS = 30
+REACH = ConnectPolicy(deadline=30.0, attempt_timeout=10.0)
 
 
 @dataclass(frozen=True)
@@ -85,9 +87,17 @@ class BeatReport:
 class Supervisor:
     """One worker process's supervision: its threads, its questions still out, its connections."""
 
-    def __init__(self, connections: ConnectionCache, threads: int = PROBE_THREADS) -> None:
+    def __init__(
+        self,
+        connections: ConnectionCache,
+        threads: int = PROBE_THREADS,
+        command_seconds: int = COMMAND_SECONDS,
+        reach: ConnectPolicy = REACH,
+    ) -> None:
         self.connections = connections
         self.pid = os.getpid()
+        self._command_seconds = command_seconds
+        self._reach = reach
         self._pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="supervise")
         self._out: dict[tuple[int, str], Future[SimAnswer | RouterAnswer]] = {}
 
@@ -111,9 +121,7 @@ class Supervisor:
                 continue
             for role, target in _roles(found):
                 if (run.id, role) not in self._out and (run.id, role) not in answers:
-                    asked[run.id, role] = self._pool.submit(
-                        self._ask, run.id, role, target, found, config.run_probe_seconds
-                    )
+                    asked[run.id, role] = self._pool.submit(self._ask, run.id, role, target, found)
         report.asked = len(asked)
         if asked:
             wait(asked.values(), timeout=config.run_probe_seconds)
@@ -146,16 +154,14 @@ class Supervisor:
         self._pool.shutdown(wait=True)
 
     def _ask(
-        self, run_id: int, role: str, target: SSHTarget, found: RunTargets, seconds: int
+        self, run_id: int, role: str, target: SSHTarget, found: RunTargets
     ) -> SimAnswer | RouterAnswer:
         """Ask one machine (in a pool thread: SSH only, no database)."""
         executor = SSHExecutor(
             found.host_keys,
             secrets=[found.private_key],
-            connect_policy=ConnectPolicy(
-                deadline=seconds, attempt_timeout=min(float(seconds), ATTEMPT_SECONDS)
-            ),
-            default_timeout=seconds,
+            connect_policy=self._reach,
+            default_timeout=self._command_seconds,
             connections=self.connections,
         )
         try:

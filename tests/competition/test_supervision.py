@@ -22,7 +22,7 @@ from cloudsim.launched_constellations.connect import forget_connections
 from cloudsim.models import ConstellationState, RunState, Team
 from provisioners.providers.local import netns
 from provisioners.providers.local.driver import LocalNodeDriver
-from provisioners.remote.ssh import ConnectionCache
+from provisioners.remote.ssh import ConnectionCache, ConnectPolicy
 from tests.support.lightweight_runs import Host, boot_hosts, live_run
 
 pytestmark = pytest.mark.hosts
@@ -58,9 +58,11 @@ def test_a_beat_keeps_connections_and_a_hung_machine_delays_no_other_run(
 ) -> None:
     slow = live_run(team_a.id, "a-beat", hosts["slow"])
     quick = live_run(team_b.id, "b-beat", hosts["quick"])
-    config = replace(app.config["CLOUDSIM"], run_probe_seconds=2)
+    config = replace(app.config["CLOUDSIM"], run_probe_seconds=3)
     cache = ConnectionCache()
-    supervisor = Supervisor(cache)
+    # a hung machine's question gives up sooner than in production, to keep the test short
+    reach = ConnectPolicy(deadline=6.0, attempt_timeout=2.0, first_delay=0.1)
+    supervisor = Supervisor(cache, command_seconds=5, reach=reach)
     try:
         first, second = beat(supervisor, config), beat(supervisor, config)
         assert (first.asked, first.answered, first.late) == (2, 2, [])
