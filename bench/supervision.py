@@ -13,8 +13,10 @@ process and one run of this script:
   after the other), 30 runs: the reference the new beat is compared with;
 - `cold` (the first beat: every connection made) and `steady` (median of the next beats,
   connections kept) for 1, 10 and 30 runs;
-- 30 runs while one host is frozen (SIGSTOP: its sshd and sessions do not answer at all):
-  the beat ends after CLOUDSIM_RUN_PROBE_SECONDS with the other 29 runs answered.
+- 30 runs while one sim takes 6 s to answer (its stand-in `systemctl` sleeps), and while one
+  host is frozen (SIGSTOP: its sshd and sessions do not answer at all): the beat ends after
+  CLOUDSIM_RUN_PROBE_SECONDS with the other 29 runs answered, the slow one late (its answer
+  is applied by a later beat).
 
 Usage: python -m bench.supervision [--runs 30] [--hosts 30] [--beats 5]
 """
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import shutil
 import signal
 import statistics
@@ -41,10 +44,12 @@ from cloudsim.extensions import db
 from cloudsim.models import Run, RunState, Team
 from provisioners.providers.local.driver import LocalNodeDriver
 from provisioners.remote.ssh import ConnectionCache
-from tests.support.lightweight_runs import Host, boot_hosts, live_run
+from tests.support.lightweight_runs import SYSTEMCTL, Host, boot_hosts, live_run
 from tests.support.servers import RedisServer
 
 PREFIX = "csbeatb"
+SLOW_SECONDS = 6
+SLOW_SYSTEMCTL = f"#!/bin/sh\nsleep {SLOW_SECONDS}\nexit 0\n"
 
 
 def main() -> None:
@@ -106,18 +111,51 @@ def _bench(config: Config, hosts: list[Host], most: int, beats: int) -> None:
         )
     old = figures["old"]
     print(f"{most:3d} runs, connect per beat, one run after another: {old * 1000:7.1f} ms")
-    slow = _frozen_beat(config, hosts[0])
+    slow, caught_up = _slow_beat(config, hosts[0])
     print(
-        f"{most:3d} runs, one host frozen: beat {slow.seconds * 1000:7.1f} ms"
+        f"{most:3d} runs, one sim answering after {SLOW_SECONDS} s:"
+        f" beat {slow.seconds * 1000:7.1f} ms,"
+        f" {slow.answered} machines answered on time, late runs {slow.late};"
+        f" its answer applied by a beat {caught_up:.1f} s later"
+    )
+    frozen = _frozen_beat(config, hosts[0])
+    print(
+        f"{most:3d} runs, one host frozen: beat {frozen.seconds * 1000:7.1f} ms"
         f" (CLOUDSIM_RUN_PROBE_SECONDS={config.run_probe_seconds}),"
-        f" {slow.answered} machines answered on time, late runs {slow.late}"
+        f" {frozen.answered} machines answered on time, late runs {frozen.late}"
     )
     one, many, cold = figures["steady 1"], figures[f"steady {most}"], figures[f"cold {most}"]
     print("ratios:")
     print(f"  steady beat, {most} runs / 1 run:                 {many / one:6.2f}")
     print(f"  connect per beat / kept connections, {most} runs: {old / many:6.2f}")
     print(f"  first beat / steady beat, {most} runs:            {cold / many:6.2f}")
-    print(f"  one host frozen / steady beat, {most} runs:       {slow.seconds / many:6.2f}")
+    print(f"  one slow sim / steady beat, {most} runs:          {slow.seconds / many:6.2f}")
+    print(f"  one host frozen / steady beat, {most} runs:       {frozen.seconds / many:6.2f}")
+
+
+def _slow_beat(config: Config, slow: Host) -> tuple[BeatReport, float]:
+    """Time a beat while one sim takes SLOW_SECONDS to answer, and when its answer lands."""
+    cache = ConnectionCache()
+    supervisor = Supervisor(cache)
+    try:
+        supervisor.beat(config)
+        db.session.commit()
+        slow.run(f"printf '%s' {shlex.quote(SLOW_SYSTEMCTL)} > /usr/local/bin/systemctl")
+        try:
+            report = supervisor.beat(config)
+            db.session.commit()
+            started = time.monotonic()
+            while True:
+                time.sleep(1.0)  # the beat's period, shortened
+                later = supervisor.beat(config)
+                db.session.commit()
+                if not later.late:
+                    return report, time.monotonic() - started
+        finally:
+            slow.run(f"printf '%s' {shlex.quote(SYSTEMCTL)} > /usr/local/bin/systemctl")
+    finally:
+        supervisor.close()
+        cache.clear()
 
 
 def _frozen_beat(config: Config, frozen: Host) -> BeatReport:
