@@ -15,13 +15,18 @@ from tests.conftest import log_in, make_user, token_for
 from tests.support.season import new_teams
 
 
-def test_users_list_walks_page_by_page(app: Flask) -> None:
+def add_members(count: int) -> None:
+    """Add a team with `count` members (rows only: none of them logs in)."""
     team = new_teams(1)[0]
     db.session.add_all(
-        User(email=f"paged{n:03d}@example.org", team_id=team.id, password_hash="x")
-        for n in range(130)
+        User(email=f"member-{n:03d}@example.org", team_id=team.id, password_hash="x")
+        for n in range(count)
     )
     db.session.commit()
+
+
+def test_users_list_walks_page_by_page(app: Flask) -> None:
+    add_members(130)
     headers = token_for(make_user(Role.OFFICER))
     client = app.test_client()
 
@@ -41,12 +46,7 @@ def test_users_list_walks_page_by_page(app: Flask) -> None:
 
 
 def test_users_page_walks_page_by_page(app: Flask) -> None:
-    team = new_teams(1)[0]
-    db.session.add_all(
-        User(email=f"listed{n:03d}@example.org", team_id=team.id, password_hash="x")
-        for n in range(130)
-    )
-    db.session.commit()
+    add_members(130)
     client = app.test_client()
     log_in(client, make_user(Role.OFFICER))
     pages = follow(client, "/users", "Next →", r'<tr><td><a href="/users/\d+">([^<]+)</a>')
