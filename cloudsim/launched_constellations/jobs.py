@@ -34,7 +34,7 @@ from cloudsim.launched_constellations.keys import (
 )
 from cloudsim.launched_constellations.lifecycle import ConstellationJob
 from cloudsim.launched_constellations.service import launched_kind
-from cloudsim.launched_constellations.software import Supply, supply_needs
+from cloudsim.launched_constellations.software import Supply, preinstall, supply_needs
 from cloudsim.launched_constellations.verify import verify_constellation
 from cloudsim.models import Constellation, ConstellationState, Secret
 from cloudsim.providers.service import Provider, open_provider
@@ -101,6 +101,9 @@ def _launch(
     ctx.stage("network", 5)
     subnet = ensure_network(ctx, driver, constellation, kind)
     ctx.stage("machines", 10)
+    for change in driver.ex_prepare():
+        ctx.log(f"raised the hosts' shared kernel limit {change}")
+    preinstall(ctx.log, driver, kind, config)
     nodes = ensure_machines(ctx, provider, constellation, kind, keys, subnet)
     record_routes(constellation, provider, nodes)
     ctx.checkpoint()

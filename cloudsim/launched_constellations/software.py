@@ -17,13 +17,26 @@ from cloudsim.jobs.runner import JobContext
 from cloudsim.launched_constellations.keys import instance_admin_password
 from cloudsim.launched_constellations.vpn import server_material
 from cloudsim.models import Constellation
+from constellations.definition import ConstellationKind
 from constellations.plans import Need, PlanContext, needs_of
+from constellations.plans.roles import SIMULATOR_VENV
+from constellations.plans.router import CSROUTER_VENV
 from constellations.plans.software import (
     build_source_bundle,
     build_wheelhouse,
     distribution_source,
+    preinstall_command,
 )
+from provisioners.providers.base import CloudSimNodeDriver
+from provisioners.providers.errors import ProviderError
 from provisioners.remote.ssh import SSHExecutor
+
+# What a provider with image layers (local) installs once for all machines instead of on each:
+# the distribution, the virtualenv the plans install it into, the requirement.
+PREINSTALLED = {
+    Need.SIMULATOR_WHEELS: ("drcsim", SIMULATOR_VENV, "drcsim"),
+    Need.ROUTER_WHEELS: ("cloudsim-router", CSROUTER_VENV, "cloudsim-router"),
+}
 
 
 @dataclass(frozen=True)
@@ -99,3 +112,28 @@ def supply_needs(supply: Supply, contexts: dict[str, PlanContext]) -> dict[str, 
             for name, c in contexts.items()
         }
     return contexts
+
+
+def preinstall(
+    log: Callable[[str], None], driver: CloudSimNodeDriver, kind: ConstellationKind, config: Config
+) -> None:
+    """Install the kind's wheelhouses once into the provider's image, where it has layers:
+    the machines' plans then find them installed instead of each uploading and installing."""
+    wanted = frozenset().union(*(needs_of(m.plan) for m in kind.machines))
+    for need, (distribution, venv, requirement) in PREINSTALLED.items():
+        if need not in wanted:
+            continue
+        wheels = build_wheelhouse(
+            distribution_source(distribution),
+            config.instance_dir / "wheelhouse",
+            config.machine_python,
+        )
+        try:
+            made = driver.ex_image_layer(wheels.name, preinstall_command(wheels, venv, requirement))
+        except ProviderError as exc:
+            log(f"could not install {requirement} into the image ({exc}): each machine will")
+            continue
+        if made is None:
+            return  # the provider has no image layers: the plans install on each machine
+        if made:
+            log(f"installed {requirement} into {venv} in the machines' image ({wheels.name})")

@@ -8,6 +8,7 @@ import socket
 import subprocess
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -106,18 +107,22 @@ def verify_constellation(
             failures.append(f"{name} does not answer over SSH: {answer}")
     addresses = {m.name: (m.public_ip or m.private_ip or "") for m in constellation.machines}
     private = {m.name: m.private_ip or "" for m in constellation.machines}
-    for check in kind.reachability:
-        if check.source == VPN:
-            continue  # checked below, through a VPN client of its own
 
-        def probe(check: Reachability = check) -> tuple[bool, bool]:
+    def probe(check: Reachability) -> bool:
+        def attempt() -> tuple[bool, bool]:
             if check.source == PUBLIC:
                 seen = _probe_public(public_probe, addresses[check.target], check.port)
             else:
                 seen = _probe_from(executor, reach[check.source], private[check.target], check.port)
             return seen == check.allowed, seen
 
-        connected = retry.until(_name(check), probe)
+        return retry.until(_name(check), attempt)
+
+    # all at once: a forbidden pair is a connection that must time out, PROBE_SECONDS each
+    checks = [check for check in kind.reachability if check.source != VPN]  # VPN: below
+    with ThreadPoolExecutor(max_workers=max(1, len(checks))) as pool:
+        outcomes = list(pool.map(probe, checks))
+    for check, connected in zip(checks, outcomes, strict=True):
         owner = check.target if check.source == PUBLIC else check.source
         results[owner]["checks"].append(check_result(check, connected))
         if connected != check.allowed:

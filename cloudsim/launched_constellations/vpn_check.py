@@ -9,6 +9,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -66,9 +67,12 @@ def check_vpn(
                 return [check_result(row, False) for row in rows]
             route = ["ip", "route", "replace", constellation.resources["subnet"], "dev", device]
             subprocess.run(there(route), check=True, capture_output=True, timeout=30)
-            results = [
-                check_result(row, _reaches(there, private[row.target], row.port)) for row in rows
-            ]
+            # all at once: each closed row waits PROBE_SECONDS for its timeout
+            with ThreadPoolExecutor(max_workers=len(rows)) as pool:
+                opened = list(
+                    pool.map(lambda row: _reaches(there, private[row.target], row.port), rows)
+                )
+            results = [check_result(row, seen) for row, seen in zip(rows, opened, strict=True)]
             # revoked, the check client must lose the LAN within seconds
             vpn.revoke_certificate(constellation, issued.serial, name)
             ctx.checkpoint()  # record the list before the router gets it (and let go of SQLite)

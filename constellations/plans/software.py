@@ -136,7 +136,7 @@ def _offline_install(
     the wheels of these distributions.
     """
     remote = f"{REMOTE_ROOT}/{folder.name}"
-    marker = f"{venv}/.cloudsim-installed-{folder.name}"
+    marker = _marker(venv, folder)
     wanted = {
         name: digest
         for name, digest in _sums((folder / SUMS).read_text()).items()
@@ -157,6 +157,22 @@ def _offline_install(
         return True
 
     return Action(description, run)
+
+
+def _marker(venv: str, folder: Path) -> str:
+    """Return the file whose presence says folder's software is installed into venv."""
+    return f"{venv}/.cloudsim-installed-{folder.name}"
+
+
+def preinstall_command(wheelhouse: Path, venv: str, requirement: str) -> str:
+    """Return a command installing requirement into venv from the wheelhouse where it lies
+    (e.g. into an image every machine starts from), marked as install_wheelhouse marks it,
+    so that action finds it done (also its `only` variant: a subset of the same wheels)."""
+    q_wheelhouse = shlex.quote(str(wheelhouse))
+    return (
+        f"{_pip_into(venv)} --no-index --find-links {q_wheelhouse} {shlex.quote(requirement)} "
+        f"&& touch {shlex.quote(_marker(venv, wheelhouse))}"
+    )
 
 
 def _pip_into(venv: str) -> str:

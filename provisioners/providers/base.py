@@ -107,6 +107,11 @@ class CloudSimNodeDriver(NodeDriver):  # type: ignore[misc]
         """Make ready what every machine of this provider shares; return what changed."""
         return []
 
+    def ex_image_layer(self, name: str, command: str) -> bool | None:
+        """Install once, for every machine made afterwards, what command (bash, as root)
+        installs; True: made now, False: it existed, None: this provider cannot (default)."""
+        return None
+
     def ex_capacity(self, pending: Demand | None = None) -> Capacity | None:
         """Return what the provider can still take beyond pending; None: it does not know."""
         return None

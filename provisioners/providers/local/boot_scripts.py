@@ -38,8 +38,11 @@ first_boot() {
 
 MOUNT_OVERLAY = r"""
 root=$host_dir/root
+lower=/
+# image layers (layers.py) stacked above "/", fixed when the host was created
+if [ -s "$host_dir/lowerdir" ]; then lower=$(cat "$host_dir/lowerdir"); fi
 mount -t overlay "$machine" \
-  -o "lowerdir=/,upperdir=$host_dir/upper,workdir=$host_dir/work" "$root"
+  -o "lowerdir=$lower,upperdir=$host_dir/upper,workdir=$host_dir/work" "$root"
 """
 
 # PID 1 of fresh mount/UTS/IPC/PID namespaces, already inside the host's network namespace.

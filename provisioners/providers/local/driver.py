@@ -18,7 +18,7 @@ from libcloud.compute.base import (
 
 from provisioners.providers.base import CloudSimNodeDriver
 from provisioners.providers.capacity import Capacity, Demand
-from provisioners.providers.local import host, netns
+from provisioners.providers.local import host, layers, netns
 from provisioners.providers.local.addresses import (
     check_name,
     check_prefix,
@@ -207,6 +207,16 @@ class LocalNodeDriver(CloudSimNodeDriver):
         candidates = self._networks.subnet_pool.subnets(new_prefix=SUBNET_PREFIX)
         return sum(1 for c in candidates if not any(c.overlaps(t) for t in taken))
 
+    @requires_root
+    def ex_image_layer(self, name: str, command: str) -> bool | None:
+        """Make an image layer once: what command (bash, as root) changes in a scratch copy of
+        this machine's root. Hosts created afterwards see it read-only, shared; True if made
+        now, False if it existed."""
+        check_name("layer", name)
+        with self._store.lock():
+            host.mount_hosts_tmpfs(self._store.hosts_dir, f"{self.prefix}-hosts")
+            return layers.build_layer(self._store.hosts_dir, name, command)
+
     # -- nodes ---------------------------------------------------------------------------------
 
     @requires_root
@@ -282,6 +292,9 @@ class LocalNodeDriver(CloudSimNodeDriver):
             self.destroy_node(node)
         for network in self.ex_list_networks():
             self.ex_destroy_network(network)
+        with self._store.lock():
+            if not self._store.read_nodes():  # image layers made for hosts never created
+                host.unmount_hosts_tmpfs(self._store.hosts_dir)
         leaked = sweep_prefix(self.prefix)
         with self._store.lock():
             self._store.remove_empty_dirs()

@@ -10,7 +10,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from provisioners.providers.local import boot_scripts, processes
+from provisioners.providers.local import boot_scripts, layers, processes
 from provisioners.providers.local.commands import command_succeeds, run_command
 from provisioners.providers.local.errors import CommandError, HostBootError, InvalidRequestError
 from provisioners.providers.local.netns import can_connect, netns_path
@@ -173,6 +173,7 @@ def start_host(spec: HostSpec, timeout: float) -> HostProcesses:
         # The upper dir's mode becomes the mode of the host's "/": it must match the real one.
         upper.chmod(0o755)
         hide_paths(upper, spec.hidden_paths)
+    layers.record_lowerdir(spec.host_dir)
     masked = units_to_mask() if spec.init == INIT_SYSTEMD else []
     with open(spec.boot_log, "ab") as log:
         try:
