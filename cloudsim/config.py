@@ -59,7 +59,19 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_ADMIN_PASSWORD": Setting(
         "", "Password of the first admin; unset = generated and printed once"
     ),
+    "CLOUDSIM_ADMIN_TOKEN": Setting(
+        "",
+        "An API token (cst_...) the first admin gets at start-up (how a master calls its instance)",
+    ),
     "CLOUDSIM_BIND": Setting("127.0.0.1:5000", "Address the web server listens on"),
+    "CLOUDSIM_TLS_CERT": Setting(
+        "",
+        "PEM certificate file: when set (with CLOUDSIM_TLS_KEY) the web server speaks HTTPS only",
+    ),
+    "CLOUDSIM_TLS_KEY": Setting("", "PEM private key file of CLOUDSIM_TLS_CERT"),
+    "CLOUDSIM_INSTANCE_POLL_SECONDS": Setting(
+        "30", "How often a master checks its team instances' health (and reconciles them)"
+    ),
     "CLOUDSIM_WEB_WORKERS": Setting("2", "gunicorn worker processes"),
     "CLOUDSIM_WORKER_CONCURRENCY": Setting("2", "Celery worker processes"),
     "CLOUDSIM_SECURE_COOKIES": Setting("false", "Mark cookies Secure (set true behind HTTPS)"),
@@ -162,7 +174,11 @@ class Config:
     encryption_keys: tuple[str, ...] = field(repr=False)
     admin_email: str
     admin_password: str | None = field(repr=False)
+    admin_token: str | None = field(repr=False)
     bind: str
+    tls_cert: str
+    tls_key: str
+    instance_poll_seconds: int
     web_workers: int
     worker_concurrency: int
     secure_cookies: bool
@@ -203,7 +219,14 @@ class Config:
         shown = ", ".join(
             f"{f.name}={getattr(self, f.name)!r}"
             for f in fields(self)
-            if f.name not in {"secret_key", "encryption_keys", "admin_password", "artifact_secret"}
+            if f.name
+            not in {
+                "secret_key",
+                "encryption_keys",
+                "admin_password",
+                "admin_token",
+                "artifact_secret",
+            }
         )
         return f"Config({shown})"
 
@@ -250,6 +273,12 @@ class Config:
                 Fernet(key)
             except ValueError:
                 raise ConfigError("CLOUDSIM_ENCRYPTION_KEYS holds a malformed Fernet key") from None
+        if bool(get("CLOUDSIM_TLS_CERT")) != bool(get("CLOUDSIM_TLS_KEY")):
+            raise ConfigError(
+                "CLOUDSIM_TLS_CERT and CLOUDSIM_TLS_KEY go together: set both or none"
+            )
+        if get("CLOUDSIM_ADMIN_TOKEN") and not get("CLOUDSIM_ADMIN_TOKEN").startswith("cst_"):
+            raise ConfigError("CLOUDSIM_ADMIN_TOKEN must be an API token (cst_...)")
         values: dict[str, object] = dict(
             instance_dir=instance_dir,
             database_url=get("CLOUDSIM_DATABASE_URL")
@@ -261,7 +290,11 @@ class Config:
             encryption_keys=encryption_keys,
             admin_email=get("CLOUDSIM_ADMIN_EMAIL"),
             admin_password=get("CLOUDSIM_ADMIN_PASSWORD") or None,
+            admin_token=get("CLOUDSIM_ADMIN_TOKEN") or None,
             bind=get("CLOUDSIM_BIND"),
+            tls_cert=get("CLOUDSIM_TLS_CERT"),
+            tls_key=get("CLOUDSIM_TLS_KEY"),
+            instance_poll_seconds=number("CLOUDSIM_INSTANCE_POLL_SECONDS"),
             web_workers=number("CLOUDSIM_WEB_WORKERS"),
             worker_concurrency=number("CLOUDSIM_WORKER_CONCURRENCY"),
             secure_cookies=secure,

@@ -24,6 +24,7 @@ FEATURES = (
     "cloudsim.providers",
     "cloudsim.competition",
     "cloudsim.viewer",
+    "cloudsim.team_instances",
 )
 
 

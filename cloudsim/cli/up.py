@@ -10,6 +10,7 @@ from sqlalchemy import select
 
 from cloudsim import migrate
 from cloudsim.auth.policy import SYSTEM
+from cloudsim.auth.tokens import ensure_admin_token
 from cloudsim.cli import app_context, reports_errors
 from cloudsim.competition.demo import schedule_demo
 from cloudsim.config import Config
@@ -92,6 +93,7 @@ def _services(config: Config) -> list[tuple[Service, float]]:
         )
     )
     host, port = _host_port(config.bind)
+    tls = ["--certfile", config.tls_cert, "--keyfile", config.tls_key] if config.tls_cert else []
     services.append(
         (
             Service(
@@ -108,6 +110,7 @@ def _services(config: Config) -> list[tuple[Service, float]]:
                     "-",
                     "--log-level",
                     log_level.lower(),
+                    *tls,
                     "cloudsim.wsgi:app",
                 ],
                 env,
@@ -168,13 +171,16 @@ def up(demo: bool) -> None:
             click.echo(f"created the first admin: {admin.user.email}")
             if admin.generated_password:
                 click.echo(f"  password (shown once): {admin.generated_password}")
+        if config.admin_token and ensure_admin_token(config.admin_email, config.admin_token):
+            click.echo(f"gave {config.admin_email} the API token from CLOUDSIM_ADMIN_TOKEN")
     supervisor = Supervisor(log=lambda line: click.echo(f"cloudsim up: {line}", err=True))
     try:
         for service, timeout in _services(config):
             supervisor.add(service, timeout)
-        click.echo(f"CloudSim is running at http://{config.bind}/  (Ctrl-C stops everything)")
+        scheme = "https" if config.tls_cert else "http"
+        click.echo(f"CloudSim is running at {scheme}://{config.bind}/  (Ctrl-C stops everything)")
         if demo:
-            _launch_demo(f"http://{config.bind}/")
+            _launch_demo(f"{scheme}://{config.bind}/")
         supervisor.run()
     except RuntimeError as exc:
         raise click.ClickException(str(exc)) from None

@@ -49,7 +49,7 @@ def constellation_data(constellation: Constellation) -> dict[str, object]:
     }
 
 
-def _wait(job_id: str, quiet: bool) -> Job:
+def follow_job(job_id: str, quiet: bool) -> Job:
     """Follow a job to its end, with a progress bar on a terminal; run it here if no worker
     is alive (after Ctrl-C on `cloudsim up`, nothing else would)."""
     commit()  # the command's work so far: the job row exists and its message is sent
@@ -87,7 +87,7 @@ def _wait(job_id: str, quiet: bool) -> Job:
 def _follow(found: Constellation, job: Job, what: str, wait: bool, as_json: bool) -> None:
     """Print the constellation and its job, after following the job to its end with --wait."""
     if wait:
-        job = _wait(job.id, as_json)
+        job = follow_job(job.id, as_json)
         db.session.refresh(found)
     emit(
         constellation_data(found) | {"job": job.id},

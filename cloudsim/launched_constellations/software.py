@@ -14,7 +14,11 @@ from typing import Any
 
 from cloudsim.config import Config
 from cloudsim.jobs.runner import JobContext
-from cloudsim.launched_constellations.keys import instance_admin_password
+from cloudsim.launched_constellations.keys import (
+    instance_admin_password,
+    instance_admin_token,
+    instance_tls,
+)
 from cloudsim.launched_constellations.vpn import server_material
 from cloudsim.models import Constellation
 from constellations.definition import ConstellationKind
@@ -82,6 +86,12 @@ def _vpn(supply: Supply) -> dict[str, Any]:
 def _cloudsim_bundle(supply: Supply) -> dict[str, Any]:
     supply.ctx.log("bundling CloudSim's source and wheels (cached after the first time)")
     password = supply.secret(instance_admin_password(supply.constellation))
+    token = supply.secret(instance_admin_token(supply.constellation))
+    tls = instance_tls(supply.constellation)
+    supply.secret(tls.key)
+    # stored now: an uncommitted write would hold SQLite's lock through the whole install,
+    # and every other job's log lines would wait for it
+    supply.ctx.checkpoint()
     # the machines' packages CloudSim imports come from the same checkout, installed alike
     members = [distribution_source("drcsim"), distribution_source("cloudsim-router")]
     bundle = build_source_bundle(
@@ -90,7 +100,13 @@ def _cloudsim_bundle(supply: Supply) -> dict[str, Any]:
         supply.config.machine_python,
         members,
     )
-    return {"app_bundle": bundle, "secrets": {"cloudsim_admin_password": password}}
+    secrets = {
+        "cloudsim_admin_password": password,
+        "cloudsim_admin_token": token,
+        "cloudsim_tls_cert": tls.cert,
+        "cloudsim_tls_key": tls.key,
+    }
+    return {"app_bundle": bundle, "secrets": secrets}
 
 
 SUPPLIERS: dict[Need, Callable[[Supply], dict[str, Any]]] = {

@@ -7,6 +7,7 @@ from cloudsim.models.jobs import Job, JobState
 from cloudsim.models.machines import Constellation, ConstellationState, Machine, MachineState
 from cloudsim.models.people import ApiToken, LoginSession, Role, SshKey, Team, User
 from cloudsim.models.secrets import Secret, SecretKind
+from cloudsim.models.team_instances import InstanceState, TeamInstance
 
 __all__ = [
     "ApiToken",
@@ -15,6 +16,7 @@ __all__ = [
     "Base",
     "Constellation",
     "ConstellationState",
+    "InstanceState",
     "Job",
     "JobState",
     "LoginSession",
@@ -29,6 +31,7 @@ __all__ = [
     "SshKey",
     "Task",
     "Team",
+    "TeamInstance",
     "User",
     "utcnow",
 ]

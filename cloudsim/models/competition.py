@@ -35,6 +35,8 @@ class Task(Base):
     order: Mapped[int] = mapped_column(default=0)
     # The zone the officer entered the window in: pages and exports show it that way again.
     time_zone: Mapped[str] = mapped_column(String(64), default="UTC")
+    # on a team instance: the master's task this one copies ("m<id>"); None: made here
+    master_key: Mapped[str | None] = mapped_column(String(32), unique=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
 
     team: Mapped[Team] = relationship()

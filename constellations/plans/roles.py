@@ -16,6 +16,8 @@ CLIENT_ONLY = ("drcsim", "pyzmq", "msgpack")
 CLOUDSIM_ROOT = "/opt/cloudsim/src"
 CLOUDSIM_VENV = "/opt/cloudsim/venv"
 CLOUDSIM_ENV = "/etc/cloudsim/cloudsim.env"
+CLOUDSIM_TLS_CERT = "/etc/cloudsim/tls.crt"
+CLOUDSIM_TLS_KEY = "/etc/cloudsim/tls.key"
 CLOUDSIM_INSTANCE = "/var/lib/cloudsim"
 CLOUDSIM_PORT = 5000
 CLOUDSIM_ADMIN_EMAIL = "admin@example.org"
@@ -74,6 +76,9 @@ def cloudsim_server(ctx: PlanContext) -> list[PlanItem]:
             "port": CLOUDSIM_PORT,
             "admin_email": CLOUDSIM_ADMIN_EMAIL,
             "admin_password": ctx.secrets["cloudsim_admin_password"],
+            "admin_token": ctx.secrets["cloudsim_admin_token"],
+            "tls_cert": CLOUDSIM_TLS_CERT,
+            "tls_key": CLOUDSIM_TLS_KEY,
         },
     )
     unit = ctx.templates.render(
@@ -89,6 +94,9 @@ def cloudsim_server(ctx: PlanContext) -> list[PlanItem]:
         install_source_bundle(ctx.app_bundle, CLOUDSIM_ROOT, CLOUDSIM_VENV),
         directory("/etc/cloudsim", mode=0o700),
         file(CLOUDSIM_ENV, env, mode=0o600),
+        # HTTPS only on the public side: the master's CA signed it and the master pins it
+        file(CLOUDSIM_TLS_CERT, ctx.secrets["cloudsim_tls_cert"], mode=0o644),
+        file(CLOUDSIM_TLS_KEY, ctx.secrets["cloudsim_tls_key"], mode=0o600),
         file("/etc/systemd/system/cloudsim.service", unit),
         Action("systemctl daemon-reload", _daemon_reload),
         service("cloudsim", running=True, enabled=True),

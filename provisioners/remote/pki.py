@@ -9,6 +9,7 @@ checks (serverAuth for the router, clientAuth for team users).
 from __future__ import annotations
 
 import datetime
+import ipaddress
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -76,6 +77,30 @@ def issue_server(
     return _issue(ca, common_name, ExtendedKeyUsageOID.SERVER_AUTH, days)
 
 
+def issue_tls_server(
+    ca: CertificateAuthority,
+    common_name: str,
+    addresses: Iterable[str],
+    *,
+    days: int = DEFAULT_CERT_DAYS,
+) -> IssuedCertificate:
+    """Issue an HTTPS server's certificate (serverAuth) for these IP addresses or DNS names."""
+    names: list[x509.GeneralName] = []
+    for address in addresses:
+        try:
+            names.append(x509.IPAddress(ipaddress.ip_address(address)))
+        except ValueError:
+            names.append(x509.DNSName(address))
+    if not names:
+        raise PKIError("an HTTPS certificate needs at least one address")
+    return _issue(ca, common_name, ExtendedKeyUsageOID.SERVER_AUTH, days, names)
+
+
+def certificate_fingerprint(cert_pem: str) -> str:
+    """Return the SHA-256 of a certificate's DER form, in hex (what a client pins)."""
+    return _load_cert(cert_pem).fingerprint(hashes.SHA256()).hex()
+
+
 def issue_client(
     ca: CertificateAuthority, common_name: str, *, days: int = DEFAULT_CERT_DAYS
 ) -> IssuedCertificate:
@@ -138,7 +163,11 @@ def revoked_serials(crl_pem: str, ca: CertificateAuthority) -> set[int]:
 
 
 def _issue(
-    ca: CertificateAuthority, common_name: str, usage: x509.ObjectIdentifier, days: int
+    ca: CertificateAuthority,
+    common_name: str,
+    usage: x509.ObjectIdentifier,
+    days: int,
+    alt_names: list[x509.GeneralName] | None = None,
 ) -> IssuedCertificate:
     ca_cert, ca_key = _load_ca(ca)
     key = ec.generate_private_key(ec.SECP256R1())
@@ -162,9 +191,11 @@ def _issue(
         .add_extension(
             x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False
         )
-        .sign(ca_key, hashes.SHA256())
     )
-    return IssuedCertificate(_cert_pem(cert), _key_pem(key), serial, common_name, not_after)
+    if alt_names:
+        cert = cert.add_extension(x509.SubjectAlternativeName(alt_names), critical=False)
+    signed = cert.sign(ca_key, hashes.SHA256())
+    return IssuedCertificate(_cert_pem(signed), _key_pem(key), serial, common_name, not_after)
 
 
 def _name(common_name: str) -> x509.Name:

@@ -71,7 +71,9 @@ def leftovers(config: Config) -> dict[str, list[str]]:
     mounts = Path("/proc/mounts").read_text()
     state = config.instance_dir / "local-hosts"
     return {
-        "netns": [line.split()[0] for line in netns.splitlines() if line.startswith(PREFIX)],
+        "netns": [
+            line.split()[0] for line in netns.splitlines() if line.startswith(config.local_prefix)
+        ],
         "mounts": [line for line in mounts.splitlines() if str(state) in line],
         "files": [str(p) for p in state.rglob("*") if p.is_file() and "lock" not in p.name]
         if state.exists()

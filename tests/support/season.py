@@ -41,6 +41,7 @@ from cloudsim.models import (
     SshKey,
     Task,
     Team,
+    TeamInstance,
     User,
     utcnow,
 )
@@ -283,11 +284,16 @@ def team_urls(app: Flask, team_id: int, endpoints: Iterable[str]) -> dict[str, s
         "run_id": run.id,
         "artifact_id": run.artifacts[0].id,
     }
+    instance = db.session.scalar(select(TeamInstance.id).order_by(TeamInstance.id.desc()))
+    if instance is not None:  # a season with team instances (their pages need one)
+        ids["instance_id"] = instance
     wanted = set(endpoints)
     found = {}
     with app.test_request_context():
         for rule in app.url_map.iter_rules():
             if rule.endpoint in wanted and "GET" in (rule.methods or ()):
+                if "instance_id" in rule.arguments and "instance_id" not in ids:
+                    continue
                 values = {k: v for k, v in ids.items() if k in rule.arguments}
                 found[rule.endpoint] = url_for(rule.endpoint, **values)
     return found

@@ -19,6 +19,7 @@ from cloudsim.auth.tokens import issue_token
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Constellation, ConstellationState, Role, Team, User
+from cloudsim.team_instances import service as team_instances
 from tests.competition.support import finished_run, open_task, ready_constellation
 from tests.conftest import log_in, make_user, token_for
 
@@ -137,6 +138,19 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_competition.StopRun", "POST"): (401, 409, 404, 409, 409),
     ("api_competition.RunLog", "GET"): (401, 200, 404, 200, 200),
     ("api_competition.Leaderboard", "GET"): (401, 200, 200, 200, 200),
+    # team instances (a fresh spare each time): admins only
+    ("team_instances.index", "GET"): (LOGIN, 403, 403, 403, 200),
+    ("team_instances.deploy", "POST"): (LOGIN, 403, 403, 403, 400),  # an empty form
+    ("team_instances.show", "GET"): (LOGIN, 403, 403, 403, 200),
+    ("team_instances.assign", "POST"): (LOGIN, 403, 403, 403, 400),  # no team chosen
+    ("team_instances.terminate", "POST"): (LOGIN, 403, 403, 403, 302),
+    ("api_team_instances.TeamInstances", "GET"): (401, 403, 403, 403, 200),
+    ("api_team_instances.TeamInstances", "POST"): (401, 403, 403, 403, 202),
+    ("api_team_instances.TeamInstanceById", "GET"): (401, 403, 403, 403, 200),
+    ("api_team_instances.TeamInstanceById", "PATCH"): (401, 403, 403, 403, 200),
+    ("api_team_instances.TeamInstanceById", "DELETE"): (401, 403, 403, 403, 202),
+    ("api_team_instances.InstanceHealth", "GET"): (401, 403, 403, 403, 200),
+    ("api_team_instances.DesiredState", "PUT"): (401, 403, 403, 403, 200),
 }
 
 IGNORED_ENDPOINTS = {"static"}
@@ -168,6 +182,13 @@ def _bodies(team_id: int) -> dict[tuple[str, str], Callable[[], dict[str, Any]]]
             "start": "2030-01-01 09:00",
             "stop": "2030-01-01 12:00",
             "team_ids": [team_id],
+        },
+        ("api_team_instances.TeamInstances", "POST"): lambda: {"name": f"mx-{next(_seq)}"},
+        ("api_team_instances.TeamInstanceById", "PATCH"): lambda: {"team_id": team_id},
+        ("api_team_instances.DesiredState", "PUT"): lambda: {
+            "team": None,
+            "users": [],
+            "tasks": [],
         },
         ("api_competition.Season", "POST"): lambda: {
             "yaml": "tasks: [{name: Matrix season, world: vrc_task_2, "
@@ -215,6 +236,9 @@ def _url(
         values["key_id"] = generate_key(user_a, "victim").key.id
     if "job_id" in rule.arguments:
         values["job_id"] = job_id
+    if "instance_id" in rule.arguments:
+        deployed = team_instances.deploy(SYSTEM, name=f"mx-{next(_seq)}", provider="local")
+        values["instance_id"] = deployed[0][0].id
     if "ref" in rule.arguments:
         values["ref"] = constellation_id
     if {"task_id", "run_id"} & set(rule.arguments):

@@ -17,7 +17,7 @@ from sqlalchemy import event
 
 from cloudsim.competition.artifacts import LogStore
 from cloudsim.extensions import db
-from cloudsim.models import Role, Team, User
+from cloudsim.models import Constellation, Machine, Role, Team, TeamInstance, User
 from tests.conftest import log_in, make_user, token_for
 from tests.support.season import add_credentials, add_season, new_teams, team_urls
 from tests.web.test_authorization_matrix import MATRIX, PERSONAS
@@ -47,6 +47,12 @@ def grow(team_a: Team, others: list[Team], people: dict[str, User], scale: int) 
     add_season(store, teams, "x", users=scale, runs=scale, jobs=scale, events=4 * scale)
     for user in people.values():
         add_credentials(user, scale)
+    for n in range(scale):  # team instances (admins' page and list), with their machines
+        constellation = Constellation(name=f"ti-{scale}-{n}", kind="cloudsim", provider="local")
+        constellation.machines.append(Machine(name="server", role="cloudsim"))
+        db.session.add(
+            TeamInstance(name=constellation.name, team=teams[n], constellation=constellation)
+        )
     db.session.commit()
     others[:] = teams[1:]
 

@@ -1,0 +1,125 @@
+"""`cloudsim instance`: deploy, list, assign, check and terminate team instances."""
+
+from __future__ import annotations
+
+import click
+from flask import current_app
+
+from cloudsim.auth.policy import SYSTEM
+from cloudsim.cli import app_context, emit, reports_errors
+from cloudsim.extensions import db
+from cloudsim.launched_constellations.cli import follow_job
+from cloudsim.models import TeamInstance
+from cloudsim.people.service import find_team
+from cloudsim.providers.service import PROVIDERS
+from cloudsim.team_instances import service
+from cloudsim.team_instances.poll import check_instances
+
+
+def instance_data(instance: TeamInstance) -> dict[str, object]:
+    return {
+        "id": instance.id,
+        "name": instance.name,
+        "team": instance.team.name if instance.team else None,
+        "state": instance.state.value,
+        "url": instance.url,
+        "version": instance.version,
+        "health": instance.health,
+        "error": instance.error,
+        "checked_at": instance.checked_at,
+        "last_sync_at": instance.last_sync_at,
+        "sync_error": instance.sync_error,
+    }
+
+
+def _line(instance: TeamInstance) -> str:
+    team = instance.team.name if instance.team else "spare"
+    why = f" ({instance.error})" if instance.error else ""
+    return f"{instance.name}  {team}  {instance.state.value}{why}  {instance.url or ''}"
+
+
+@click.group()
+def instance() -> None:
+    """Deploy and watch team instances (a CloudSim per team, run from this master)."""
+
+
+@instance.command("deploy")
+@click.option("--name", required=True, help="Instance name (lowercase, digits, '-').")
+@click.option("--provider", default="local", show_default=True, type=click.Choice(PROVIDERS))
+@click.option("--team", "team_name", help="Team name or id (none: spares).")
+@click.option("--count", default=1, show_default=True, type=click.IntRange(1, 50))
+@click.option("--wait", is_flag=True, help="Follow the deployment to its end and check it.")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def deploy(
+    name: str, provider: str, team_name: str | None, count: int, wait: bool, as_json: bool
+) -> None:
+    """Deploy a team's CloudSim, or COUNT spares named NAME-1..N."""
+    with app_context():
+        team_id = find_team(team_name).id if team_name else None
+        deployed = service.deploy(
+            SYSTEM, name=name, provider=provider, team_id=team_id, count=count
+        )
+        if wait:
+            for _, job in deployed:
+                follow_job(job.id, as_json)
+            db.session.expire_all()
+            check_instances(current_app.config["CLOUDSIM"], [i.id for i, _ in deployed])
+        instances = [i for i, _ in deployed]
+        emit(
+            [instance_data(i) for i in instances],
+            as_json,
+            "\n".join(_line(i) for i in instances),
+        )
+
+
+@instance.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def list_instances(as_json: bool) -> None:
+    """List team instances with their state and health."""
+    with app_context():
+        instances = db.session.scalars(service.visible_instances(SYSTEM)).all()
+        emit(
+            [instance_data(i) for i in instances],
+            as_json,
+            "\n".join(_line(i) for i in instances) or "no team instances",
+        )
+
+
+@instance.command("check")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def check(as_json: bool) -> None:
+    """Check every live instance's health now (what the beat does periodically)."""
+    with app_context():
+        instances = check_instances(current_app.config["CLOUDSIM"])
+        emit(
+            [instance_data(i) for i in instances],
+            as_json,
+            "\n".join(_line(i) for i in instances) or "no live team instances",
+        )
+
+
+@instance.command("assign")
+@click.argument("name")
+@click.option("--team", "team_name", required=True, help="Team name or id.")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def assign(name: str, team_name: str, as_json: bool) -> None:
+    """Give a spare instance to a team."""
+    with app_context():
+        found = service.assign(SYSTEM, name, find_team(team_name).id)
+        emit(instance_data(found), as_json, _line(found))
+
+
+@instance.command("terminate")
+@click.argument("name")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def terminate(name: str, as_json: bool) -> None:
+    """Terminate an instance's machines (its record stays, as history)."""
+    with app_context():
+        job = service.terminate(SYSTEM, name)
+        found = service.get_instance(SYSTEM, name)
+        emit(instance_data(found) | {"job": job.id}, as_json, f"{_line(found)} (job {job.id})")

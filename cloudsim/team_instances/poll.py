@@ -1,0 +1,131 @@
+"""The master's watch over its team instances, every CLOUDSIM_INSTANCE_POLL_SECONDS (beat)
+or on demand (`cloudsim instance check`): each one's state and health, then its desired state
+pushed again (the reconcile: drift made on the instance is put back, a lagging one caught up).
+
+Network calls run in parallel with short timeouts, so one slow or dead instance never
+holds up the others; the database is read before and written after, in this thread.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any
+
+from celery import shared_task
+from flask import current_app
+from sqlalchemy import select
+
+from cloudsim.config import Config
+from cloudsim.errors import CloudSimError
+from cloudsim.extensions import db
+from cloudsim.launched_constellations.keys import instance_admin_token, instance_tls
+from cloudsim.models import ConstellationState, InstanceState, TeamInstance
+from cloudsim.providers.service import open_provider
+from cloudsim.team_instances import lifecycle
+from cloudsim.team_instances.client import Endpoint, InstanceError, call
+from cloudsim.team_instances.sync import desired_state, sync_failed, synced
+from constellations.plans.roles import CLOUDSIM_PORT
+
+PARALLEL = 8
+CALL_TIMEOUT = 10.0
+
+
+def endpoint_of(instance: TeamInstance, config: Config) -> Endpoint:
+    """Return how to call an instance whose constellation is ready (pinning its certificate)."""
+    constellation = instance.constellation
+    address = next((m.public_ip for m in constellation.machines if m.public_ip), None)
+    if address is None:
+        raise InstanceError(f"{instance.name} has no public address")
+    tls = instance_tls(constellation)
+    if instance.cert_fingerprint is None:
+        instance.cert_fingerprint = tls.fingerprint  # pinned from the first check on
+    try:
+        proxy = open_provider(constellation.provider, config).driver.ex_public_proxy_command(
+            address, CLOUDSIM_PORT
+        )
+    except Exception as exc:  # a provider failing: unreachable
+        raise InstanceError(f"no route to {address}: {exc}") from None
+    return Endpoint(
+        host=address,
+        port=CLOUDSIM_PORT,
+        ca_cert=tls.ca_cert,
+        fingerprint=instance.cert_fingerprint,
+        token=instance_admin_token(constellation),
+        proxy=proxy,
+    )
+
+
+@dataclass(frozen=True)
+class Visit:
+    """What one instance answered: its health (or why not), and the sync (or why not)."""
+
+    health: dict[str, Any] | str
+    sync: dict[str, Any] | str | None = None
+
+
+def _visit(endpoint: Endpoint, desired: dict[str, Any]) -> Visit:
+    """Check an instance's health, then push its desired state (the reconcile)."""
+    try:
+        health = call(endpoint, "GET", "/instance/health", timeout=CALL_TIMEOUT)
+    except InstanceError as exc:
+        return Visit(str(exc))
+    if not isinstance(health, dict):
+        return Visit("the health check answered no object")
+    try:
+        answer = call(endpoint, "PUT", "/instance/desired-state", desired, timeout=CALL_TIMEOUT)
+    except InstanceError as exc:
+        return Visit(health, str(exc))
+    return Visit(health, answer if isinstance(answer, dict) else "the sync answered no object")
+
+
+def check_instances(
+    config: Config,
+    ids: list[int] | None = None,
+    connect: Callable[[TeamInstance, Config], Endpoint] = endpoint_of,
+) -> list[TeamInstance]:
+    """Bring every live instance's state up to date with its constellation and its health,
+    and push its desired state. `connect` says how to reach one (bench/ uses stand-ins)."""
+    query = select(TeamInstance).where(TeamInstance.state != InstanceState.TERMINATED)
+    if ids is not None:
+        query = query.where(TeamInstance.id.in_(ids))
+    instances = list(db.session.scalars(query.order_by(TeamInstance.id)))
+    endpoints: dict[int, Endpoint] = {}
+    desired: dict[int, dict[str, Any]] = {}
+    for instance in instances:
+        state = instance.constellation.state
+        if state == ConstellationState.ERROR:
+            lifecycle.failed(instance, instance.constellation.error or "its constellation failed")
+        elif state == ConstellationState.TERMINATED:
+            lifecycle.terminated(instance)
+        elif state == ConstellationState.READY:
+            try:
+                endpoints[instance.id] = connect(instance, config)
+                desired[instance.id] = desired_state(instance)
+            except (InstanceError, CloudSimError) as exc:
+                lifecycle.unreachable(instance, str(exc))
+    with ThreadPoolExecutor(max_workers=PARALLEL) as pool:
+        visits = pool.map(_visit, endpoints.values(), [desired[i] for i in endpoints])
+        answers = dict(zip(endpoints, visits, strict=True))
+    for instance in instances:
+        visit = answers.get(instance.id)
+        if visit is None:
+            continue
+        if isinstance(visit.health, str):
+            lifecycle.unreachable(instance, visit.health)
+            sync_failed(instance, f"unreachable: {visit.health}")
+            continue
+        lifecycle.healthy(instance, endpoints[instance.id].url, visit.health)
+        if isinstance(visit.sync, dict):
+            synced(instance, visit.sync)
+        elif visit.sync is not None:
+            sync_failed(instance, visit.sync)
+    db.session.flush()
+    return instances
+
+
+@shared_task(name="cloudsim.team_instances.poll")
+def poll() -> int:
+    """Check every live team instance (beat)."""
+    return len(check_instances(current_app.config["CLOUDSIM"]))

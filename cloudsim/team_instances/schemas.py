@@ -1,0 +1,118 @@
+"""Request and response schemas of the team instances API (master side and instance side)."""
+
+from __future__ import annotations
+
+from marshmallow import Schema, fields, validate
+
+from cloudsim.jobs.schemas import JobSchema
+from cloudsim.web.inputs import Id
+
+
+class HealthSchema(Schema):
+    version = fields.Str()
+    database = fields.Bool()
+    queue = fields.Bool()
+    worker = fields.Bool()
+    worker_seen_seconds_ago = fields.Float(allow_none=True)
+
+
+class TeamInstanceSchema(Schema):
+    id = fields.Int()
+    name = fields.Str()
+    team_id = fields.Int(allow_none=True)
+    constellation_id = fields.Int()
+    state = fields.Str(
+        metadata={"description": "deploying, ready, unreachable, error or terminated"}
+    )
+    url = fields.Str(allow_none=True, metadata={"description": "HTTPS only"})
+    cert_fingerprint = fields.Str(
+        allow_none=True, metadata={"description": "SHA-256 of the pinned certificate"}
+    )
+    version = fields.Str(allow_none=True)
+    health = fields.Nested(HealthSchema)
+    error = fields.Str(allow_none=True)
+    checked_at = fields.DateTime(allow_none=True)
+    last_sync_at = fields.DateTime(allow_none=True)
+    sync_error = fields.Str(allow_none=True)
+    created_at = fields.DateTime()
+
+
+class DeploySchema(Schema):
+    name = fields.Str(required=True, validate=validate.Length(min=1, max=21))
+    provider = fields.Str(load_default="local", validate=validate.Length(min=1, max=32))
+    team_id = Id(allow_none=True, load_default=None)
+    count = fields.Int(
+        load_default=1,
+        validate=validate.Range(min=1, max=50),
+        metadata={"description": "more than 1: spares NAME-1..NAME-N, assigned later"},
+    )
+
+
+class DeployedSchema(Schema):
+    instance = fields.Nested(TeamInstanceSchema)
+    job = fields.Nested(JobSchema)
+
+
+class AssignSchema(Schema):
+    team_id = Id(required=True)
+
+
+class DesiredKeySchema(Schema):
+    name = fields.Str(required=True, validate=validate.Length(max=80))
+    public_key = fields.Str(required=True, validate=validate.Length(min=1, max=16000))
+
+
+class DesiredUserSchema(Schema):
+    email = fields.Email(required=True, validate=validate.Length(max=254))
+    name = fields.Str(required=True, validate=validate.Length(max=120))
+    role = fields.Str(required=True, validate=validate.OneOf(["user", "officer"]))
+    active = fields.Bool(required=True)
+    password_hash = fields.Str(
+        required=True,
+        validate=[validate.Length(max=255), validate.Regexp(r"\$argon2id\$")],
+        metadata={"description": "the master's Argon2id hash: the same password logs in"},
+    )
+    ssh_keys = fields.List(
+        fields.Nested(DesiredKeySchema), required=True, validate=validate.Length(max=20)
+    )
+
+
+class DesiredTaskSchema(Schema):
+    key = fields.Str(
+        required=True,
+        validate=validate.Length(min=1, max=32),
+        metadata={"description": "the master's name for the task (m<id>)"},
+    )
+    name = fields.Str(required=True, validate=validate.Length(min=1, max=120))
+    world = fields.Str(required=True, validate=validate.Length(min=1, max=64))
+    run_config = fields.Int(required=True, validate=validate.Range(min=1, max=100))
+    window_start = fields.AwareDateTime(required=True)
+    window_stop = fields.AwareDateTime(required=True)
+    time_zone = fields.Str(required=True, validate=validate.Length(min=1, max=64))
+    timeout_s = fields.Int(required=True, validate=validate.Range(min=1, max=86_400))
+    latency_ms = fields.Int(required=True, validate=validate.Range(min=0, max=10_000))
+    uplink_bits = fields.Int(required=True, validate=validate.Range(min=0, max=2**62))
+    downlink_bits = fields.Int(required=True, validate=validate.Range(min=0, max=2**62))
+    order = fields.Int(required=True, validate=validate.Range(min=-10_000, max=10_000))
+
+
+class DesiredStateSchema(Schema):
+    team = fields.Str(
+        allow_none=True,
+        load_default=None,
+        validate=validate.Length(min=1, max=80),
+        metadata={"description": "the instance's team (none: a spare)"},
+    )
+    users = fields.List(
+        fields.Nested(DesiredUserSchema), required=True, validate=validate.Length(max=10_000)
+    )
+    tasks = fields.List(
+        fields.Nested(DesiredTaskSchema), required=True, validate=validate.Length(max=10_000)
+    )
+
+
+class SyncResultSchema(Schema):
+    changed = fields.List(fields.Str(), metadata={"description": "what this sync changed"})
+    reported = fields.List(
+        fields.Str(), metadata={"description": "what it found and left for people to decide"}
+    )

@@ -1,0 +1,181 @@
+"""The master's side of propagation: what each instance must have (desired state), the job
+that pushes it, and the hook that starts that job for the instances a change concerns.
+
+A change to a user, an SSH key, a task or a team starts one `team_instance.sync` job per
+ready instance concerned, when the change commits (an officer or a key change: every
+instance). The periodic check (`poll.check_instances`) pushes the same state to every ready
+instance too: that is the reconcile, which puts back what was changed on an instance by
+hand and catches up an instance that was unreachable. A failure is the instance's alone
+(its own job, its own call with a short timeout) and is shown on its page.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+from flask import current_app
+from sqlalchemy import event, inspect, or_, select
+from sqlalchemy.orm import Session
+
+from cloudsim.audit.service import record
+from cloudsim.auth.policy import SYSTEM
+from cloudsim.competition.season import SPEC_FIELDS
+from cloudsim.extensions import db
+from cloudsim.jobs.runner import JobContext, Payload, job_kind
+from cloudsim.jobs.service import enqueue
+from cloudsim.models import (
+    InstanceState,
+    Role,
+    SshKey,
+    Task,
+    Team,
+    TeamInstance,
+    User,
+    utcnow,
+)
+from cloudsim.team_instances.client import InstanceError, call
+
+DIRTY = "cloudsim.team_instances.dirty"
+EVERY_TEAM = -1  # a change that concerns every instance (officers, keys of unknown owners)
+SYNC_JOB = "team_instance.sync"
+
+
+def desired_state(instance: TeamInstance) -> dict[str, Any]:
+    """Return what the instance must have: its team, its members and the officers (with
+    their password hashes and SSH keys), and the team's tasks; JSON-ready."""
+    team = instance.team
+    wanted = User.role == Role.OFFICER
+    if team is not None:
+        wanted = or_(wanted, (User.role == Role.USER) & (User.team_id == team.id))
+    users = db.session.scalars(select(User).where(wanted).order_by(User.id))
+    tasks: list[Task] = (
+        list(db.session.scalars(select(Task).where(Task.team_id == team.id).order_by(Task.id)))
+        if team is not None
+        else []
+    )
+    return {
+        "team": team.name if team is not None else None,
+        "users": [
+            {
+                "email": user.email,
+                "name": user.name,
+                "role": user.role.value,
+                "active": user.active,
+                "password_hash": user.password_hash,
+                "ssh_keys": [{"name": k.name, "public_key": k.public_key} for k in user.ssh_keys],
+            }
+            for user in users
+        ],
+        "tasks": [
+            {"key": f"m{task.id}"} | {name: _plain(getattr(task, name)) for name in SPEC_FIELDS}
+            for task in tasks
+        ],
+    }
+
+
+def _plain(value: object) -> object:
+    return value.isoformat() if isinstance(value, datetime) else value
+
+
+def synced(instance: TeamInstance, answer: dict[str, Any]) -> None:
+    """Record a sync the instance accepted, and what it changed (drift put back, or news)."""
+    instance.last_sync_at, instance.sync_error = utcnow(), None
+    report = {"changed": answer.get("changed", []), "reported": answer.get("reported", [])}
+    instance.sync_report = report
+    if report["changed"]:
+        record(
+            "team_instance.sync",
+            SYSTEM,
+            target_type="team_instance",
+            target_id=instance.id,
+            team_id=instance.team_id,
+            changed=report["changed"][:50],
+        )
+
+
+def sync_failed(instance: TeamInstance, error: str) -> None:
+    """Record why the instance is behind (its last successful sync time stays)."""
+    instance.sync_error = error
+
+
+@dataclass(frozen=True)
+class InstanceJob(Payload):
+    """The payload of a team instance's jobs: which instance."""
+
+    instance_id: int
+
+    def about(self) -> tuple[str, int]:
+        return ("team_instance", self.instance_id)
+
+
+@job_kind(SYNC_JOB, payload=InstanceJob)
+def sync_instance(ctx: JobContext, payload: InstanceJob) -> None:
+    """Push the desired state to one instance; fail (and say why on its page) if it refuses."""
+    from cloudsim.team_instances.poll import endpoint_of
+
+    instance = ctx.load(TeamInstance, payload.instance_id)
+    if instance.state != InstanceState.READY:
+        ctx.log(f"{instance.name} is {instance.state.value}: the periodic check catches it up")
+        return
+    try:
+        endpoint = endpoint_of(instance, current_app.config["CLOUDSIM"])
+        ctx.mask(endpoint.token)
+        answer = call(endpoint, "PUT", "/instance/desired-state", desired_state(instance))
+    except InstanceError as exc:
+        sync_failed(instance, str(exc))
+        ctx.checkpoint()
+        raise
+    synced(instance, answer)
+    ctx.log(f"changed: {answer.get('changed') or 'nothing'}")
+
+
+def _teams_of(row: object) -> set[int]:
+    """Return the teams whose instances a changed row concerns."""
+    if isinstance(row, User):
+        return {row.team_id} if row.role == Role.USER and row.team_id else {EVERY_TEAM}
+    if isinstance(row, SshKey):
+        user = row.__dict__.get("user")  # never load during a flush
+        if isinstance(user, User) and user.role == Role.USER and user.team_id:
+            return {user.team_id}
+        return {EVERY_TEAM}
+    if isinstance(row, Task):
+        return {row.team_id}
+    if isinstance(row, Team):
+        return {row.id}
+    if isinstance(row, TeamInstance) and row.team_id:
+        # assigned to a team; not its own health or sync records, which would loop
+        return {row.team_id} if inspect(row).attrs.team_id.history.has_changes() else set()
+    return set()
+
+
+@event.listens_for(Session, "after_flush")
+def _note_changes(session: Session, _context: object) -> None:
+    teams: set[int] = session.info.setdefault(DIRTY, set())
+    for row in (*session.new, *session.dirty, *session.deleted):
+        teams |= _teams_of(row)
+        if isinstance(row, User):  # moved out of a team: the old one's instance too
+            old: list[int | None] = list(inspect(row).attrs.team_id.history.deleted or ())
+            teams |= {t for t in old if t}
+
+
+@event.listens_for(Session, "before_commit")
+def _start_syncs(session: Session) -> None:
+    session.flush()  # the commit would flush after this hook: note its changes first
+    teams = session.info.pop(DIRTY, None)
+    if not teams:
+        return
+    query = select(TeamInstance).where(TeamInstance.state == InstanceState.READY)
+    if EVERY_TEAM not in teams:
+        query = query.where(TeamInstance.team_id.in_(teams))
+    # One job per change, never folded into a queued one: a queued job may already have read
+    # the database when this commit lands (the periodic reconcile would catch up, but later).
+    for instance in session.scalars(query):
+        enqueue(SYNC_JOB, SYSTEM, InstanceJob(instance.id), team_id=instance.team_id)
+    session.info.pop(DIRTY, None)  # the jobs' own rows concern nobody
+
+
+@event.listens_for(Session, "after_rollback")
+def _forget_changes(session: Session) -> None:
+    session.info.pop(DIRTY, None)

@@ -1,0 +1,253 @@
+"""A master deploys two team instances on local hosts: real CloudSims (own database, Redis,
+worker) on their own public addresses, reached only over HTTPS with a pinned certificate."""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import shlex
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, cast
+
+import pytest
+from cryptography import x509
+from cryptography.hazmat.primitives import serialization
+from flask import Flask
+from playwright.sync_api import expect, sync_playwright
+from sqlalchemy import select
+
+from cloudsim.auth.policy import SYSTEM
+from cloudsim.auth.ssh_keys import add_key
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.launched_constellations.keys import (
+    instance_admin_password,
+    instance_admin_token,
+    instance_tls,
+)
+from cloudsim.models import Constellation, InstanceState, Job, JobState, Role, Team, TeamInstance
+from cloudsim.people.service import create_team, update_user
+from cloudsim.providers.service import open_provider
+from cloudsim.team_instances.client import call
+from cloudsim.team_instances.poll import check_instances, endpoint_of
+from tests.competition.support import open_task
+from tests.conftest import PASSWORD, csrf_token, log_in, make_user, token_for
+from tests.launched_constellations.conftest import finished, leftovers
+from tests.support.servers import wait_for
+from tests.team_instances.test_sync import KEY
+from tests.web.test_browser import CHROMIUM, CHROMIUM_ARGS
+
+pytestmark = pytest.mark.hosts
+
+
+def _ready(config: Config) -> list[TeamInstance] | None:
+    """Check the instances once; return them when every one is ready with a live worker."""
+    db.session.expire_all()
+    instances = check_instances(config)
+    db.session.commit()
+    done = all(i.state == InstanceState.READY and i.health.get("worker") for i in instances)
+    return instances if done else None
+
+
+def test_master_deploys_team_instances_and_pins_their_certificates(
+    constellations_app: Flask,
+    constellations_worker: None,
+    constellations_config: Config,
+    tmp_path: Path,
+) -> None:
+    team_a, team_b = create_team(SYSTEM, "Team A"), create_team(SYSTEM, "Team B")
+    admin = make_user(Role.ADMIN)
+    client = constellations_app.test_client()
+    # As the README says: the API with its documented body ...
+    answer = client.post(
+        "/api/v1/team-instances",
+        json={"name": "team-a", "provider": "local", "team_id": team_a.id},
+        headers=token_for(admin),
+    )
+    assert answer.status_code == 202, answer.get_json()
+    jobs = [answer.get_json()[0]["job"]["id"]]
+    # ... and the page's form, really submitted.
+    log_in(client, admin)
+    page = client.get("/team-instances").get_data(as_text=True)
+    form = {
+        "csrf_token": csrf_token(page),
+        "name": "team-b",
+        "provider": "local",
+        "team": str(team_b.id),
+        "count": "1",
+    }
+    answer = client.post("/team-instances", data=form)
+    assert answer.status_code == 302, answer.get_data(as_text=True)
+    second = db.session.scalar(select(TeamInstance).where(TeamInstance.name == "team-b"))
+    assert second is not None and second.team_id == team_b.id
+    jobs.append(
+        db.session.scalar(
+            select(Job.id).where(
+                Job.target_type == "constellation", Job.target_id == second.constellation_id
+            )
+        )
+    )
+    for job_id in jobs:
+        done = finished(job_id, 900)
+        assert done.state == JobState.SUCCEEDED, f"{done.error}\n{done.log[-3000:]}"
+        constellation = db.session.get(Constellation, done.target_id)
+        assert constellation is not None
+        # the instance's admin password and the master's token on it never reach the job log
+        for secret in (instance_admin_password(constellation), instance_admin_token(constellation)):
+            assert secret not in done.log
+
+    instances = cast(
+        list[TeamInstance], wait_for(lambda: _ready(constellations_config), 120, "instances ready")
+    )
+    for instance in instances:
+        address = instance.constellation.machines[0].public_ip
+        assert instance.url == f"https://{address}:5000/"
+        assert instance.version and instance.health["database"] and instance.health["queue"]
+        assert instance.team_id in {team_a.id, team_b.id}
+    page = client.get("/team-instances").get_data(as_text=True)
+    assert page.count('class="state ready">ready') == 2 and "worker up" in page
+
+    # No plain HTTP on the public address: the port speaks TLS only.
+    driver = open_provider("local", constellations_config).driver
+    first = instances[0]
+    plain = _raw_exchange(
+        driver.ex_public_proxy_command(first.constellation.machines[0].public_ip, 5000) or [],
+        b"GET /login HTTP/1.0\r\nHost: team\r\n\r\n",
+    )
+    assert not plain.startswith(b"HTTP/")
+
+    # A certificate that is not the pinned one is refused: the instance is unreachable, why shown.
+    pinned = first.cert_fingerprint
+    first.cert_fingerprint = "00" * 32
+    db.session.commit()
+    check_instances(constellations_config, [first.id])
+    assert first.state == InstanceState.UNREACHABLE
+    assert "does not match the pinned" in (first.error or "")
+    assert "does not match the pinned" in client.get(f"/team-instances/{first.id}").get_data(
+        as_text=True
+    )
+    first.cert_fingerprint = pinned
+    check_instances(constellations_config, [first.id])
+    assert first.state == InstanceState.READY, first.error
+    db.session.commit()
+
+    _propagation(constellations_config, instances, team_a, team_b, tmp_path)
+
+    for instance in instances:
+        response = client.delete(f"/api/v1/team-instances/{instance.id}", headers=token_for(admin))
+        assert response.status_code == 202
+        assert finished(response.get_json()["id"]).state == JobState.SUCCEEDED
+    assert leftovers(constellations_config) == {"netns": [], "mounts": [], "files": []}
+    assert {t.state for t in db.session.scalars(select(TeamInstance))} == {InstanceState.TERMINATED}
+    assert db.session.get(Team, team_a.id) is not None
+
+
+def _raw_exchange(connect: list[str], request: bytes) -> bytes:
+    """Send bytes over a connecting command; return what comes back before it closes."""
+    with subprocess.Popen(connect, stdin=subprocess.PIPE, stdout=subprocess.PIPE) as peer:
+        out, _ = peer.communicate(request, timeout=30)
+    return out
+
+
+def _on(instance: TeamInstance, config: Config, path: str, **kwargs: Any) -> Any:
+    """Call an instance's API as the master does (pinned HTTPS, the master's admin token)."""
+    return call(endpoint_of(instance, config), kwargs.pop("method", "GET"), path, **kwargs)
+
+
+def _until(condition: Callable[[], bool], what: str) -> None:
+    """Wait for the sync jobs to bring an instance to a condition; say what they did if not."""
+    try:
+        wait_for(condition, 60, what)
+    except TimeoutError:
+        db.session.expire_all()
+        jobs = db.session.scalars(select(Job).where(Job.kind == "team_instance.sync"))
+        done = "\n".join(f"{j.state} {j.error} {j.log[-500:]}" for j in jobs)
+        rows = [(i.name, i.state, i.sync_error) for i in db.session.scalars(select(TeamInstance))]
+        raise AssertionError(f"{what}: sync jobs:\n{done}\ninstances: {rows}") from None
+
+
+def _synced(config: Config, instance: TeamInstance, emails: set[str], task: str) -> bool:
+    users = {u["email"] for u in _on(instance, config, "/users?page_size=500")}
+    tasks = {t["name"] for t in _on(instance, config, "/tasks?page_size=500")}
+    return emails <= users and task in tasks
+
+
+def _propagation(
+    config: Config, instances: list[TeamInstance], team_a: Team, team_b: Team, tmp: Path
+) -> None:
+    """Users, keys and tasks made on the master reach each team's instance, and only theirs."""
+    by_team = {i.team_id: i for i in instances}
+    on_a, on_b = by_team[team_a.id], by_team[team_b.id]
+    member_a, member_b = make_user(Role.USER, team_a), make_user(Role.USER, team_b)
+    officer = make_user(Role.OFFICER)
+    add_key(member_a, KEY, "laptop")
+    task_a = open_task(team_a.id, name="Walking for A")
+    open_task(team_b.id, name="Driving for B")
+    # each commit above started a sync job per instance concerned (no poll in between)
+    wanted_a = {member_a.email, officer.email}
+    _until(lambda: _synced(config, on_a, wanted_a, "Walking for A"), "A in sync")
+    _until(lambda: _synced(config, on_b, {member_b.email, officer.email}, "Driving for B"), "B")
+    assert member_b.email not in {u["email"] for u in _on(on_a, config, "/users")}
+
+    # A task edited on the master reaches the instance.
+    task_a.name = "Walking for A, edited"
+    db.session.commit()
+    _until(lambda: _synced(config, on_a, wanted_a, "Walking for A, edited"), "the edit")
+
+    # Drift: someone promotes the member on the instance by hand; the reconcile puts it back.
+    theirs = next(u for u in _on(on_a, config, "/users") if u["email"] == member_a.email)
+    _on(on_a, config, f"/users/{theirs['id']}", method="PATCH", body={"role": "officer"})
+    check_instances(config, [on_a.id])
+    db.session.commit()
+    assert any(member_a.email in c for c in on_a.sync_report["changed"]), on_a.sync_report
+    assert _on(on_a, config, f"/users/{theirs['id']}")["role"] == "user"
+    assert on_a.last_sync_at is not None and on_a.sync_error is None
+
+    # The member logs in to their instance in Chromium, with the master's password; sees
+    # their team's task only; is locked out once disabled on the master.
+    driver = open_provider("local", config).driver
+    chromium = tmp / "chromium-on-the-internet"
+    chromium.write_text(
+        "#!/bin/sh\nexec " + shlex.join(driver.ex_public_command([CHROMIUM]) or []) + ' "$@"\n'
+    )
+    chromium.chmod(0o755)
+    spki = _spki_pin(instance_tls(on_a.constellation).cert)
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(
+            executable_path=str(chromium),
+            args=[*CHROMIUM_ARGS, f"--ignore-certificate-errors-spki-list={spki}"],
+        )
+        page = browser.new_page()
+        base = (on_a.url or "").rstrip("/")
+        page.goto(f"{base}/login")
+        page.get_by_label("E-mail").fill(member_a.email)
+        page.get_by_label("Password").fill(PASSWORD)
+        page.get_by_role("button", name="Log in").click()
+        page.goto(f"{base}/tasks")
+        expect(page.get_by_text("Walking for A, edited")).to_be_visible()
+        assert "Driving for B" not in page.content() and "Team B" not in page.content()
+        update_user(SYSTEM, member_a.id, active=False)
+        db.session.commit()  # pushed at once by the sync job
+        wait_for(
+            lambda: (
+                not next(u for u in _on(on_a, config, "/users") if u["email"] == member_a.email)[
+                    "active"
+                ]
+            ),
+            60,
+            "the member disabled on the instance",
+        )
+        page.goto(f"{base}/tasks")
+        expect(page.get_by_label("Password")).to_be_visible()  # sent back to the login form
+        browser.close()
+
+
+def _spki_pin(cert_pem: str) -> str:
+    """Return Chromium's pin of a certificate's public key (base64 SHA-256 of its SPKI)."""
+    cert = x509.load_pem_x509_certificate(cert_pem.encode())
+    spki = cert.public_key().public_bytes(
+        serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo
+    )
+    return base64.b64encode(hashlib.sha256(spki).digest()).decode()

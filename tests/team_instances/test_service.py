@@ -1,0 +1,124 @@
+"""Deploying, assigning and terminating team instances: the rules, the CLI as the README shows
+it, the page's assign form; nothing reaches a machine here (no worker runs the launches)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from flask import Flask
+from sqlalchemy import select
+
+from cloudsim.auth.policy import SYSTEM
+from cloudsim.cli import main
+from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
+from cloudsim.extensions import db
+from cloudsim.models import InstanceState, Job, Role, Team, TeamInstance
+from cloudsim.team_instances import service
+from tests.competition.support import open_task
+from tests.conftest import csrf_token, log_in, make_user
+from tests.support.servers import RedisServer
+
+
+def test_rules(app: Flask, team_a: Team, team_b: Team) -> None:
+    officer = make_user(Role.OFFICER)
+    with pytest.raises(Forbidden):
+        service.deploy(officer, name="x", provider="local")
+    with pytest.raises(InvalidInput, match="spares"):
+        service.deploy(SYSTEM, name="x", provider="local", team_id=team_a.id, count=2)
+    with pytest.raises(InvalidInput, match="count"):
+        service.deploy(SYSTEM, name="x", provider="local", count=51)
+    with pytest.raises(NotFound):
+        service.deploy(SYSTEM, name="x", provider="local", team_id=999_999)
+    with pytest.raises(InvalidInput, match="provider"):
+        service.deploy(SYSTEM, name="x", provider="nowhere")
+    ((ours, _),) = service.deploy(SYSTEM, name="team-a", provider="local", team_id=team_a.id)
+    assert ours.state == InstanceState.DEPLOYING and ours.constellation.kind == "cloudsim"
+    assert ours.constellation.team_id is None  # the master's machinery: no team lists it
+    with pytest.raises(Conflict, match="already has"):
+        service.deploy(SYSTEM, name="team-a2", provider="local", team_id=team_a.id)
+    spares = [i for i, _ in service.deploy(SYSTEM, name="spare", provider="local", count=2)]
+    assert [s.name for s in spares] == ["spare-1", "spare-2"]
+    with pytest.raises(Conflict, match="already has"):
+        service.assign(SYSTEM, "spare-1", team_a.id)
+    assert service.assign(SYSTEM, "spare-1", team_b.id).team_id == team_b.id
+    with pytest.raises(Conflict, match="already serves"):
+        service.assign(SYSTEM, "spare-1", team_a.id)
+    service.terminate(SYSTEM, "spare-2")
+    with pytest.raises(Conflict, match="terminated"):
+        service.terminate(SYSTEM, "spare-2")
+    with pytest.raises(Forbidden):
+        service.get_instance(officer, ours.id)
+
+
+def test_assign_form_on_the_page(app: Flask, team_a: Team) -> None:
+    admin = make_user(Role.ADMIN)
+    ((spare, _),) = service.deploy(SYSTEM, name="spare", provider="local")
+    db.session.commit()
+    client = app.test_client()
+    log_in(client, admin)
+    page = client.get(f"/team-instances/{spare.id}").get_data(as_text=True)
+    assert "Assign to a team" in page
+    answer = client.post(
+        f"/team-instances/{spare.id}/assign",
+        data={"csrf_token": csrf_token(page), "team": str(team_a.id)},
+    )
+    assert answer.status_code == 302
+    db.session.expire_all()
+    assert db.session.get(TeamInstance, spare.id).team_id == team_a.id  # type: ignore[union-attr]
+
+
+def test_cli_as_the_readme_shows_it(
+    tmp_path: Path, redis_server: RedisServer, encryption_key: str
+) -> None:
+    env = {
+        "CLOUDSIM_INSTANCE_DIR": str(tmp_path / "instance"),
+        "CLOUDSIM_REDIS_URL": redis_server.url(0),  # a broker, but no worker behind it
+        "CLOUDSIM_ENCRYPTION_KEYS": encryption_key,
+        "CLOUDSIM_LOCAL_PREFIX": "ticli",
+    }
+
+    def cli(*args: str) -> str:
+        result = CliRunner().invoke(main, list(args), env=env)
+        assert result.exit_code == 0, result.output
+        return result.output
+
+    cli("db", "upgrade")
+    cli("team", "create", "Team 8")
+    cli("instance", "deploy", "--name", "spare", "--count", "2")
+    cli("instance", "assign", "spare-1", "--team", "Team 8")
+    listed = json.loads(cli("instance", "list", "--json"))
+    assert {(i["name"], i["team"], i["state"]) for i in listed} == {
+        ("spare-1", "Team 8", "deploying"),
+        ("spare-2", None, "deploying"),
+    }
+    assert "terminated" in cli("instance", "terminate", "spare-2")
+    bad = CliRunner().invoke(main, ["instance", "assign", "spare-9", "--team", "Team 8"], env=env)
+    assert bad.exit_code == 1 and bad.output.startswith("Error: team instance spare-9 not found")
+
+
+def test_a_change_starts_a_sync_job_per_instance_concerned(app: Flask, team_a: Team) -> None:
+    ((ours, _),) = service.deploy(SYSTEM, name="team-a", provider="local", team_id=team_a.id)
+    ((spare, _),) = service.deploy(SYSTEM, name="spare", provider="local")
+    ours.state = spare.state = InstanceState.READY
+    db.session.commit()
+
+    seen = {ours.id: 0, spare.id: 0}
+
+    def new_syncs() -> dict[int, int]:
+        query = select(Job.target_id).where(Job.kind == "team_instance.sync")
+        counts = {key: list(db.session.scalars(query)).count(key) for key in seen}
+        new = {key: counts[key] - seen[key] for key in seen}
+        seen.update(counts)
+        return new
+
+    new_syncs()
+    task = open_task(team_a.id)
+    assert new_syncs() == {ours.id: 1, spare.id: 0}
+    task.name = "Renamed on the master"  # committed without a flush first
+    db.session.commit()
+    assert new_syncs() == {ours.id: 1, spare.id: 0}
+    make_user(Role.OFFICER)  # officers are on every instance
+    assert new_syncs() == {ours.id: 1, spare.id: 1}

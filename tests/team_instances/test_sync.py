@@ -1,0 +1,134 @@
+"""A master's desired state, applied on an instance through its documented API: idempotent,
+drift put back, the same password logs in, only admins may push it."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from flask import Flask
+from sqlalchemy import select
+
+from cloudsim.auth.policy import SYSTEM
+from cloudsim.auth.ssh_keys import add_key
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.models import (
+    Constellation,
+    ConstellationState,
+    Role,
+    Task,
+    TeamInstance,
+    User,
+)
+from cloudsim.people.service import create_team, update_user
+from cloudsim.team_instances.sync import desired_state
+from tests.competition.support import open_task
+from tests.conftest import csrf_token, make_user, running_app, token_for
+
+KEY = "ssh-ed25519 AAAAC3NzaC1lZDI1NTE5AAAAIOMqqnkVzrm0SdG6UOoqKLsabgH5C9okWi0dh2l9GKJl"
+DESIRED = "/api/v1/instance/desired-state"
+
+
+def _master_state(config: Config) -> tuple[dict[str, Any], dict[str, str]]:
+    """Build a master with two teams; return team A's instance's desired state (as sent)."""
+    with running_app(config):
+        team, other = create_team(SYSTEM, "Team A"), create_team(SYSTEM, "Team B")
+        member, officer = make_user(Role.USER, team), make_user(Role.OFFICER)
+        make_user(Role.USER, other)
+        add_key(member, KEY, "laptop")
+        open_task(team.id, name="Walking 1")
+        open_task(other.id, name="Not theirs")
+        constellation = Constellation(
+            name="ti-a", kind="cloudsim", provider="local", state=ConstellationState.READY
+        )
+        instance = TeamInstance(name="ti-a", team=team, constellation=constellation)
+        db.session.add(instance)
+        db.session.commit()
+        state = json.loads(json.dumps(desired_state(instance)))
+        return state, {"member": member.email, "officer": officer.email}
+
+
+def test_desired_state_applies_once_and_puts_drift_back(
+    make_config: Callable[..., Config], tmp_path: Path
+) -> None:
+    state, who = _master_state(make_config(instance_dir=tmp_path / "master"))
+    assert [u["email"] for u in state["users"]] == [who["member"], who["officer"]]
+    assert [t["name"] for t in state["tasks"]] == ["Walking 1"]  # not team B's
+    with running_app(make_config(instance_dir=tmp_path / "instance")) as instance:
+        master = token_for(make_user(Role.ADMIN))
+        client = instance.test_client()
+        first = client.put(DESIRED, json=state, headers=master)
+        assert first.status_code == 200, first.get_json()
+        assert f"user {who['member']} created" in first.get_json()["changed"]
+        assert client.put(DESIRED, json=state, headers=master).get_json()["changed"] == []
+
+        member = db.session.scalar(select(User).where(User.email == who["member"]))
+        assert member is not None and member.team is not None
+        assert member.team.name == "Team A" and [k.public_key for k in member.ssh_keys] == [KEY]
+        _logs_in(instance, who["member"])  # the master's password, through the login form
+
+        # Drift by hand on the instance: put back (the member) or reported (a local task).
+        local = open_task(member.team_id or 0, name="Made here")
+        update_user(SYSTEM, member.id, role="officer")
+        db.session.delete(member.ssh_keys[0])
+        db.session.commit()
+        answer = client.put(DESIRED, json=state, headers=master).get_json()
+        assert any(c.startswith(f"user {who['member']}: ") for c in answer["changed"])
+        assert any("SSH key" in c and "added" in c for c in answer["changed"])
+        assert f"task 'Made here' ({local.id}) was made on this instance" in answer["reported"]
+        db.session.expire_all()
+        assert member.role == Role.USER and member.team is not None
+
+        # Disabled on the master (or deleted: not listed): disabled here, sessions end.
+        state["users"][0]["active"] = False
+        state["tasks"] = []
+        answer = client.put(DESIRED, json=state, headers=master).get_json()
+        assert f"user {who['member']}: active" in answer["changed"]
+        assert "task 'Walking 1' removed" in answer["changed"]
+        db.session.expire_all()
+        assert not member.active
+        assert db.session.scalar(select(Task).where(Task.name == "Walking 1")) is None
+
+
+def test_only_admins_push_and_bad_input_changes_nothing(app: Flask) -> None:
+    client = app.test_client()
+    officer = token_for(make_user(Role.OFFICER))
+    admin = token_for(make_user(Role.ADMIN))
+    body = {"team": "Team A", "users": [], "tasks": []}
+    assert client.put(DESIRED, json=body).status_code == 401
+    assert client.put(DESIRED, json=body, headers=officer).status_code == 403
+    bad = {
+        "team": "Team A",
+        "users": [
+            {
+                "email": "x@example.org",
+                "name": "X",
+                "role": "admin",  # a master never makes admins on an instance
+                "active": True,
+                "password_hash": "plain",
+                "ssh_keys": [],
+            }
+        ],
+        "tasks": [],
+    }
+    answer = client.put(DESIRED, json=bad, headers=admin)
+    assert answer.status_code == 422 or answer.status_code == 400, answer.get_json()
+    assert db.session.scalar(select(User).where(User.email == "x@example.org")) is None
+    assert client.get("/api/v1/instance/health", headers=officer).status_code == 403
+    health = client.get("/api/v1/instance/health", headers=admin).get_json()
+    assert health["database"] and health["queue"] and health["version"]
+
+
+def _logs_in(app: Flask, email: str) -> None:
+    """Log in on the instance's login form with the shared test password."""
+    from tests.conftest import PASSWORD
+
+    browser = app.test_client()
+    token = csrf_token(browser.get("/login").get_data(as_text=True))
+    answer = browser.post(
+        "/login", data={"email": email, "password": PASSWORD, "csrf_token": token}
+    )
+    assert answer.status_code == 302, answer.get_data(as_text=True)
