@@ -60,6 +60,8 @@ class SSHExecutor:
         self._default_timeout = default_timeout
         self._max_parallel = max_parallel
         self._policy = connect_policy or ConnectPolicy()
+        # the pinned host keys, also for transports that do not go through paramiko
+        self.host_keys = host_keys
         # with `connections`, connections come from (and stay in) that cache after close()
         self._pool = ConnectionPool(host_keys, self._policy, self.log, shared=connections)
 

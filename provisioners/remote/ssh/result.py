@@ -22,7 +22,8 @@ class CommandResult:
 
 @dataclass(frozen=True)
 class Transfer:
-    """Size and checksum of a file moved over SFTP."""
+    """Size and checksum of a file moved; resumed_from: bytes a previous try had copied."""
 
     size: int
     sha256: str
+    resumed_from: int = 0

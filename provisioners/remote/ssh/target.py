@@ -100,29 +100,40 @@ _PARAMIKO_KEY_CLASSES: tuple[tuple[type, type[paramiko.PKey]], ...] = (
 )
 
 
+def openssh_private_key(machine_name: str, key_text: str) -> bytes:
+    """Return a private key given as text (OpenSSH or PKCS#8 PEM) in OpenSSH's own format."""
+    return _private_bytes(_parse_private_key(machine_name, key_text))
+
+
 def load_private_key(machine_name: str, key_text: str) -> paramiko.PKey:
     """Parse a private key given as text (OpenSSH or PKCS#8 PEM) without touching disk."""
+    key = _parse_private_key(machine_name, key_text)
+    for crypto_class, paramiko_class in _PARAMIKO_KEY_CLASSES:
+        if isinstance(key, crypto_class):
+            # paramiko reads Ed25519 only from the OpenSSH container, so re-wrap in memory
+            openssh = _private_bytes(key)
+            return paramiko_class.from_private_key(io.StringIO(openssh.decode()))
+    raise ConnectError(
+        f"machine {machine_name!r}: unsupported private key type {type(key).__name__}"
+    )
+
+
+def _parse_private_key(machine_name: str, key_text: str) -> PrivateKeyTypes:
     data = key_text.encode()
-    key: PrivateKeyTypes
     try:
         if b"OPENSSH PRIVATE KEY" in data:
-            key = serialization.load_ssh_private_key(data, password=None)
-        else:
-            key = serialization.load_pem_private_key(data, password=None)
+            return serialization.load_ssh_private_key(data, password=None)
+        return serialization.load_pem_private_key(data, password=None)
     except (ValueError, TypeError, UnsupportedAlgorithm) as exc:
         # the message never quotes the key text: it is a secret
         raise ConnectError(
             f"machine {machine_name!r}: private key is not an unencrypted OpenSSH/PEM key"
         ) from exc
-    for crypto_class, paramiko_class in _PARAMIKO_KEY_CLASSES:
-        if isinstance(key, crypto_class):
-            # paramiko reads Ed25519 only from the OpenSSH container, so re-wrap in memory
-            openssh = key.private_bytes(
-                serialization.Encoding.PEM,
-                serialization.PrivateFormat.OpenSSH,
-                serialization.NoEncryption(),
-            )
-            return paramiko_class.from_private_key(io.StringIO(openssh.decode()))
-    raise ConnectError(
-        f"machine {machine_name!r}: unsupported private key type {type(key).__name__}"
+
+
+def _private_bytes(key: PrivateKeyTypes) -> bytes:
+    return key.private_bytes(
+        serialization.Encoding.PEM,
+        serialization.PrivateFormat.OpenSSH,
+        serialization.NoEncryption(),
     )
