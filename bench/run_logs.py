@@ -1,19 +1,22 @@
-"""Benchmark run log collection: a large state log copied off `sim`, verified and stored.
+"""Benchmark run log collection against a plain OpenSSH pipe of the same file, same route.
 
 Needs root. Launches a local `simple` constellation, writes a run's logs on its `sim` (the
-state log SIZE_MB of random bytes), then times collect_logs twice: the first copy (remote
-sha256sum, SFTP stream, local checksum, store) and the second (checksums only: nothing is
-fetched again). Prints MB/s and the worker's peak memory growth. Usage:
-python -m bench.run_logs [SIZE_MB]
+state log SIZE_MB of random bytes, 1 GiB by default), then times, on that file: an OpenSSH
+pipe (`ssh ... cat FILE > local file`, the same ssh options and route the collector uses),
+collect_logs (remote checksum, OpenSSH stream hashed as it arrives, store), the pipe again,
+and collect_logs once more (checksums only: nothing is fetched again). Prints both figures
+side by side, their ratio (collection / mean of the two pipes), the collector's peak memory
+(its own and ssh's) and the machine's load. Usage: python -m bench.run_logs [--size-mb N]
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import resource
 import shlex
 import shutil
-import sys
+import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -29,13 +32,17 @@ from cloudsim.extensions import db
 from cloudsim.launched_constellations import service
 from cloudsim.models import Job, Run, RunState, Task, Team, utcnow
 from cloudsim.providers.service import open_provider
+from provisioners.remote.ssh import SSHTarget
+from provisioners.remote.ssh.openssh import OpenSSH
 from tests.support.servers import RedisServer
 
 
 def main() -> None:
     if os.geteuid() != 0:
         raise SystemExit("bench/run_logs.py needs root (the local provider makes namespaces)")
-    size_mb = int(sys.argv[1]) if len(sys.argv) > 1 else 512
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--size-mb", type=int, default=1024, help="size of the state log, MiB")
+    size_mb = parser.parse_args().size_mb
     instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-logs-"))
     redis = RedisServer(instance / "redis")
     env = {
@@ -72,6 +79,7 @@ def _bench(app: object, config: Config, size_mb: int) -> None:
         constellation, job = service.launch(
             SYSTEM, name="logs", kind="simple", provider="local", team_id=team.id
         )
+        db.session.commit()  # the bench is the boundary: the commit sends the job
         while not job.state.final:
             time.sleep(0.5)
             db.session.expire_all()
@@ -109,20 +117,58 @@ def _bench(app: object, config: Config, size_mb: int) -> None:
             timeout=600,
         )
         store = LogStore(config)
+        staging = config.instance_dir / "staging"
+        staging.mkdir(parents=True, exist_ok=True)
+        openssh = OpenSSH(reach.executor.host_keys)
+        remote = f"{run_dir(run.id)}/state.msgpack"
+        print(f"load before: {_load()}")
+        pipes = [_pipe(openssh, reach.sim, remote, staging / "pipe.bin", size_mb)]
         peak_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        for label in ("first copy", "again (resume)"):
-            started = time.perf_counter()
-            problems = collect_logs(
-                run, reach.executor, reach.by_role(), store, config.instance_dir / "staging", print
-            )
-            seconds = time.perf_counter() - started
-            if problems:
-                raise SystemExit(f"collection failed: {problems}")
-            print(
-                f"{label}: {size_mb} MB state log in {seconds:.1f} s = {size_mb / seconds:.0f} MB/s"
-            )
+        started = time.perf_counter()
+        problems = collect_logs(run, reach.executor, reach.by_role(), store, staging, _quiet)
+        seconds = time.perf_counter() - started
+        if problems:
+            raise SystemExit(f"collection failed: {problems}")
+        collected = size_mb / seconds
         grown = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - peak_before
-        print(f"peak memory growth while collecting: {grown / 1024:.0f} MB")
+        ssh_peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        print(f"collection: {size_mb} MiB state log (and 6 small logs) in {seconds:.2f} s")
+        pipes.append(_pipe(openssh, reach.sim, remote, staging / "pipe.bin", size_mb))
+        started = time.perf_counter()
+        problems = collect_logs(run, reach.executor, reach.by_role(), store, staging, _quiet)
+        again = time.perf_counter() - started
+        reference = sum(pipes) / len(pipes)
+        print(f"load after: {_load()}")
+        print(
+            f"OpenSSH pipe {reference:.0f} MiB/s (runs: {', '.join(f'{p:.0f}' for p in pipes)}) | "
+            f"CloudSim collection {collected:.0f} MiB/s | ratio {collected / reference:.2f} "
+            "(goal >= 0.75)"
+        )
+        print(
+            f"collector peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}"
+            f" MB (grew {grown / 1024:.0f} MB while collecting); ssh client peak RSS "
+            f"{ssh_peak / 1024:.0f} MB"
+        )
+        print(f"collecting again (all stored): {again:.2f} s, nothing fetched")
+
+
+def _pipe(openssh: OpenSSH, sim: SSHTarget, remote: str, local: Path, size_mb: int) -> float:
+    """Return the MiB/s of `ssh sim cat FILE > local`, the reference the collector is held to."""
+    with openssh.command(sim, f"cat -- {shlex.quote(remote)}") as argv, local.open("wb") as out:
+        started = time.perf_counter()
+        subprocess.run(argv, stdout=out, stdin=subprocess.DEVNULL, check=True)
+        seconds = time.perf_counter() - started
+    local.unlink()
+    print(f"OpenSSH pipe: {size_mb} MiB in {seconds:.2f} s")
+    return size_mb / seconds
+
+
+def _load() -> str:
+    return subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
+
+
+def _quiet(line: str) -> None:
+    del line
 
 
 if __name__ == "__main__":

@@ -1,20 +1,26 @@
 """Run logs: copied off the machines (streamed, sha256-verified, resumable) into the log store.
 
-The store is a libcloud storage driver: `local` (a folder under the instance by default) or
-any object store libcloud knows, so there is one code path for both.
+Big logs travel over OpenSSH's client at wire speed, checked against the machine's pinned host
+key, while the machine hashes its copy; small ones over the executor's open connection. The
+store is a libcloud storage driver: `local` (a folder under the instance by default) or any
+object store libcloud knows, so there is one code path for both.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
+import os
 import shlex
 from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from drcsim import rundir
 from libcloud.storage.base import Container, StorageDriver
+from libcloud.storage.drivers.local import LocalStorageDriver
 from libcloud.storage.providers import get_driver
 from libcloud.storage.types import ContainerDoesNotExistError, ObjectDoesNotExistError
 from sqlalchemy import select
@@ -25,9 +31,13 @@ from cloudsim.extensions import db
 from cloudsim.launched_constellations.router_control import BANDWIDTH_LOG
 from cloudsim.models import Artifact, Run
 from provisioners.remote.ssh import SSHError, SSHExecutor, SSHTarget
+from provisioners.remote.ssh.openssh import OpenSSH
 
 RUNS_DIR = "/var/lib/cloudsim/runs"
 CHUNK = 1 << 20
+# below this a log is copied over the connection already open: a new OpenSSH handshake
+# (through the machine's proxy or jump) costs more than the bytes take
+BULK_BYTES = 8 << 20
 
 
 class LogCollectionError(CloudSimError):
@@ -93,6 +103,24 @@ class LogStore:
         """Store a local file under name (streamed from disk by the driver)."""
         self.driver.upload_object(str(path), self.container, name, verify_hash=False)
 
+    def keep(self, path: Path, name: str) -> None:
+        """Store a staged file and let go of it: moved into a local store on the same disk
+        (no second copy of a big log), else uploaded and removed."""
+        if isinstance(self.driver, LocalStorageDriver):
+            folder = self.driver.get_container_cdn_url(self.container, check=True)
+            target = Path(folder) / name
+            target.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.replace(path, target)
+            except OSError as exc:
+                if exc.errno != errno.EXDEV:
+                    raise
+            else:
+                target.chmod(0o664)  # as the driver's own upload leaves it
+                return
+        self.put(path, name)
+        path.unlink()
+
     def stream(self, name: str) -> Iterator[bytes]:
         """Yield the stored object in chunks."""
         obj = self.driver.get_object(self.container_name, name)
@@ -133,12 +161,30 @@ def file_sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
+# Python's hashlib uses the CPU's SHA instructions (OpenSSL), coreutils' sha256sum does not:
+# ~3x faster on a big log; sha256sum where the machine's Python is older than 3.11
+_HASHER = (
+    "python3 -c 'import hashlib, sys; "
+    'print(hashlib.file_digest(open(sys.argv[1], "rb"), "sha256").hexdigest())\' '
+    "{path} 2>/dev/null || sha256sum {path}"
+)
+
+
 def remote_sha256(executor: SSHExecutor, target: SSHTarget, path: str) -> str | None:
     """Return the SHA-256 of a file on a machine, None when the file is not there."""
     quoted = shlex.quote(path)
-    result = executor.run(target, f"if test -f {quoted}; then sha256sum {quoted}; fi", timeout=3600)
+    hasher = _HASHER.format(path=quoted)
+    result = executor.run(target, f"if test -f {quoted}; then {hasher}; fi", timeout=3600)
     text = result.stdout.strip()
     return text.split()[0] if text else None
+
+
+def remote_size(executor: SSHExecutor, target: SSHTarget, path: str) -> int | None:
+    """Return the size of a file on a machine, None when the file is not there."""
+    quoted = shlex.quote(path)
+    result = executor.run(target, f"if test -f {quoted}; then stat -c %s -- {quoted}; fi")
+    text = result.stdout.strip()
+    return int(text) if text else None
 
 
 def snapshot_bandwidth_log(executor: SSHExecutor, router: SSHTarget, run_id: int) -> None:
@@ -169,56 +215,75 @@ def collect_logs(
     staging.mkdir(parents=True, exist_ok=True)
     problems = []
     stored = {a.filename: a for a in run.artifacts}
+    openssh = OpenSSH(executor.host_keys, log=executor.log)
     for remote in RUN_LOGS:
         target = reach.get(remote.machine)
         if target is None:  # a constellation without a router has no bandwidth log
             continue
         path = f"{run_dir(run.id)}/{remote.filename}"
         try:
-            checksum = remote_sha256(executor, target, path)
-            if checksum is None:
+            size = remote_size(executor, target, path)
+            if size is None:
                 if remote.required:
                     problems.append(f"{remote.filename}: not found on {remote.machine}")
                 log(f"{remote.filename}: not on {remote.machine}")
                 continue
             name = store.object_name(run.id, remote.filename)
             artifact = stored.get(remote.filename)
-            if (
-                artifact is not None
-                and artifact.sha256 == checksum
-                and store.holds(name, artifact.size)
-            ):
-                log(f"{remote.filename}: stored already ({checksum[:12]})")
-                continue
-            size = _fetch(executor, target, path, staging / remote.filename, checksum)
-            store.put(staging / remote.filename, name)
+            if artifact is not None and artifact.size == size and store.holds(name, size):
+                checksum = remote_sha256(executor, target, path)
+                if artifact.sha256 == checksum:
+                    log(f"{remote.filename}: stored already ({checksum[:12]})")
+                    continue
+            local = staging / remote.filename
+            checksum, size = _fetch(executor, openssh, target, path, local, size)
+            store.keep(local, name)
         except (SSHError, LogCollectionError, OSError) as exc:
             problems.append(f"{remote.filename}: {exc}")
             log(f"{remote.filename}: {exc}")
             continue
         if artifact is None:
-            artifact = Artifact(run_id=run.id, filename=remote.filename, kind=remote.kind)
-            db.session.add(artifact)
+            artifact = Artifact(filename=remote.filename, kind=remote.kind)
+            run.artifacts.append(artifact)  # a second collection in this session sees it
         artifact.location = name
         artifact.sha256 = checksum
         artifact.size = size
         db.session.flush()
-        (staging / remote.filename).unlink()
         log(f"{remote.filename}: {size} bytes, sha256 {checksum[:12]} verified and stored")
     return problems
 
 
-def _fetch(executor: SSHExecutor, target: SSHTarget, path: str, local: Path, expected: str) -> int:
-    """Download unless a staged copy with the expected checksum is there from a previous try."""
-    if local.exists() and file_sha256(local) == expected:
-        return local.stat().st_size
-    transfer = executor.get_file(target, path, local)
-    if transfer.sha256 != expected:
-        local.unlink(missing_ok=True)
+def _fetch(
+    executor: SSHExecutor,
+    openssh: OpenSSH,
+    target: SSHTarget,
+    path: str,
+    local: Path,
+    size: int,
+) -> tuple[str, int]:
+    """Copy a log into local (unless a staged copy from a previous try is whole); return its
+    checksum as the machine computed it, and its size, once the copy is known to match."""
+    if local.exists():  # downloaded by a try that failed to store it
+        checksum = remote_sha256(executor, target, path)
+        if checksum is not None and file_sha256(local) == checksum:
+            return checksum, local.stat().st_size
+        local.unlink()
+    if size < BULK_BYTES:
+        checksum = remote_sha256(executor, target, path)
+        transfer = executor.get_file(target, path, local)
+    else:
+        # the machine hashes its copy while the bytes flow; ours is hashed as they arrive
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="sha256") as hashing:
+            remote = hashing.submit(remote_sha256, executor, target, path)
+            transfer = openssh.download(target, path, local)
+            checksum = remote.result()
+    if checksum is None or transfer.sha256 != checksum:
+        local.unlink(missing_ok=True)  # the next try starts over, the resumed part included
         raise LogCollectionError(
-            f"checksum mismatch: {target.name} has {expected[:12]}, received {transfer.sha256[:12]}"
+            f"checksum mismatch: {target.name} has {(checksum or 'no file')[:12]}, "
+            f"received {transfer.sha256[:12]}"
         )
-    return transfer.size
+    return checksum, transfer.size
 
 
 def artifact_for(run: Run, filename: str) -> Artifact | None:
