@@ -183,3 +183,16 @@ def instance_tls(constellation: Constellation) -> InstanceTls:
         addresses=tuple(stored["addresses"]),
         fingerprint=pki.certificate_fingerprint(stored["cert"]),
     )
+
+
+def stored_instance_ca(constellation: Constellation) -> str | None:
+    """Return the CA certificate a `cloudsim` constellation's HTTPS certificate chains to, once
+    it has one (what a browser is told to trust), without making anything."""
+    secret = db.session.scalar(
+        select(Secret).where(
+            Secret.owner_type == "constellation",
+            Secret.owner_id == constellation.id,
+            Secret.name == INSTANCE_TLS,
+        )
+    )
+    return str(json.loads(secret.value)["ca"]) if secret is not None else None

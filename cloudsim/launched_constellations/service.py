@@ -17,7 +17,11 @@ from cloudsim.extensions import db
 from cloudsim.launched_constellations import lifecycle
 from cloudsim.launched_constellations.access import TEAM_KINDS, refresh_team_access
 from cloudsim.launched_constellations.capacity import require_room
-from cloudsim.launched_constellations.keys import constellation_keypair, instance_admin_password
+from cloudsim.launched_constellations.keys import (
+    constellation_keypair,
+    instance_admin_password,
+    stored_instance_ca,
+)
 from cloudsim.models import Constellation, ConstellationState, Job, Machine, Role, Team
 from cloudsim.providers.service import PROVIDERS
 from constellations.definition import (
@@ -218,15 +222,23 @@ def ssh_bundle(actor: Actor, ref: int | str) -> tuple[str, bytes]:
         bundle.writestr("README.txt", "\n".join(lines) + "\n")
         if constellation.kind == "cloudsim":
             server = next((m for m in constellation.machines if m.public_ip), None)
-            url = f"http://{server.public_ip}:{CLOUDSIM_PORT}/" if server else "(not created yet)"
+            url = f"https://{server.public_ip}:{CLOUDSIM_PORT}/" if server else "(not created yet)"
+            ca = stored_instance_ca(constellation)
             bundle.writestr(
                 "cloudsim-admin.txt",
                 (
                     f"CloudSim of {constellation.name}: {url}\n"
                     f"admin: {CLOUDSIM_ADMIN_EMAIL}\n"
                     f"password: {instance_admin_password(constellation)}\n"
+                    + (
+                        "its certificate is signed by cloudsim-ca.crt (trust that CA)\n"
+                        if ca
+                        else ""
+                    )
                 ),
             )
+            if ca:
+                bundle.writestr("cloudsim-ca.crt", ca)
     _audit("constellation.ssh_bundle", actor, constellation)
     return f"{constellation.name}-ssh.zip", buffer.getvalue()
 

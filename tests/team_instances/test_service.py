@@ -3,7 +3,9 @@ it, the page's assign form; nothing reaches a machine here (no worker runs the l
 
 from __future__ import annotations
 
+import io
 import json
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -15,6 +17,8 @@ from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import main
 from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
 from cloudsim.extensions import db
+from cloudsim.launched_constellations.keys import instance_tls
+from cloudsim.launched_constellations.service import ssh_bundle
 from cloudsim.models import InstanceState, Job, Role, Team, TeamInstance
 from cloudsim.team_instances import service
 from tests.competition.support import open_task
@@ -122,3 +126,16 @@ def test_a_change_starts_a_sync_job_per_instance_concerned(app: Flask, team_a: T
     assert new_syncs() == {ours.id: 1, spare.id: 0}
     make_user(Role.OFFICER)  # officers are on every instance
     assert new_syncs() == {ours.id: 1, spare.id: 1}
+
+
+def test_the_ssh_bundle_gives_the_https_address_and_the_ca(app: Flask) -> None:
+    ((spare, _),) = service.deploy(SYSTEM, name="spare", provider="local")
+    constellation = spare.constellation
+    bundle = zipfile.ZipFile(io.BytesIO(ssh_bundle(SYSTEM, constellation.id)[1]))
+    assert "(not created yet)" in bundle.read("cloudsim-admin.txt").decode()
+    assert "cloudsim-ca.crt" not in bundle.namelist()  # nothing made by a download
+    constellation.machines[0].public_ip = "198.18.0.9"
+    tls = instance_tls(constellation)  # what the launch job makes at install
+    bundle = zipfile.ZipFile(io.BytesIO(ssh_bundle(SYSTEM, constellation.id)[1]))
+    assert "https://198.18.0.9:5000/" in bundle.read("cloudsim-admin.txt").decode()
+    assert bundle.read("cloudsim-ca.crt").decode() == tls.ca_cert
