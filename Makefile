@@ -21,6 +21,7 @@ lint: install
 bench: install
 	$(BIN)/python -m bench.web
 	$(BIN)/python -m bench.provision
+	$(BIN)/python -m bench.season
 	$(BIN)/python -m bench.local_hosts
 	$(BIN)/python -m bench.router
 	$(BIN)/python -m bench.run_logs
