@@ -118,43 +118,51 @@ def verify_constellation(
 
         return retry.until(_name(check), attempt)
 
-    # all at once: a forbidden pair is a connection that must time out, PROBE_SECONDS each
     checks = [check for check in kind.reachability if check.source != VPN]  # VPN: below
-    with ThreadPoolExecutor(max_workers=max(1, len(checks))) as pool:
-        outcomes = list(pool.map(probe, checks))
+    simulators = [m.name for m in kind.machines if "simulator" in m.plan]
+    routers = [m.name for m in kind.machines if "router" in m.plan]
+    # The probes (a forbidden pair is a connection that must time out, PROBE_SECONDS each) and
+    # the self-tests run in threads, all at once, while the VPN check (it writes the
+    # database, which belongs to this thread) runs here.
+    with ThreadPoolExecutor(max_workers=max(1, len(checks) + len(simulators))) as pool:
+        probes = [pool.submit(probe, check) for check in checks]
+        selftests = {
+            name: pool.submit(
+                retry.until,
+                f"{name}: simulator self-test",
+                _selftest_attempt(executor, reach[name]),
+            )
+            for name in simulators
+        }
+        vpn_seen: list[dict[str, Any]] = []
+        if routers:
+            vpn_rows = [c for c in kind.reachability if c.source == VPN]
+            router = reach[routers[0]]
+
+            def vpn_checks() -> tuple[bool, list[dict[str, Any]]]:
+                seen = check_vpn(executor, constellation, vpn_rows, router, public_command, ctx)
+                return all(row["ok"] is not False for row in seen), seen
+
+            vpn_seen = retry.until("the VPN checks", vpn_checks)
+        outcomes = [future.result() for future in probes]
+        tested = {name: future.result() for name, future in selftests.items()}
     for check, connected in zip(checks, outcomes, strict=True):
         owner = check.target if check.source == PUBLIC else check.source
         results[owner]["checks"].append(check_result(check, connected))
         if connected != check.allowed:
             failures.append(_describe(check, connected))
-    routers = [m.name for m in kind.machines if "router" in m.plan]
-    if routers:
-        vpn_rows = [c for c in kind.reachability if c.source == VPN]
-        router = reach[routers[0]]
-
-        def vpn_checks() -> tuple[bool, list[dict[str, Any]]]:
-            seen = check_vpn(executor, constellation, vpn_rows, router, public_command, ctx)
-            return all(row["ok"] is not False for row in seen), seen
-
-        for seen in retry.until("the VPN checks", vpn_checks):
-            results[seen["to"]]["checks"].append(seen)
-            if not seen["ok"]:
-                failures.append(
-                    f"vpn -> {seen['to']}:{seen['port']} {seen['seen']}, expected "
-                    f"{seen['expected']}"
-                    + (" after the check client was revoked" if seen.get("after") else "")
-                )
-    for machine in kind.machines:
-        if "simulator" in machine.plan:
-            results[machine.name]["simulator"] = retry.until(
-                f"{machine.name}: simulator self-test",
-                _selftest_attempt(executor, reach[machine.name]),
+    for seen in vpn_seen:
+        results[seen["to"]]["checks"].append(seen)
+        if not seen["ok"]:
+            failures.append(
+                f"vpn -> {seen['to']}:{seen['port']} {seen['seen']}, expected "
+                f"{seen['expected']}"
+                + (" after the check client was revoked" if seen.get("after") else "")
             )
-            if not results[machine.name]["simulator"]["ok"]:
-                failures.append(
-                    f"{machine.name}: simulator self-test failed: "
-                    f"{results[machine.name]['simulator'].get('detail', '')}"
-                )
+    for name, selftest in tested.items():
+        results[name]["simulator"] = selftest
+        if not selftest["ok"]:
+            failures.append(f"{name}: simulator self-test failed: {selftest.get('detail', '')}")
     stamp = utcnow().isoformat()
     for row in constellation.machines:
         row.verification = {**results[row.name], "at": stamp}
