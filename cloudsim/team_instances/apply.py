@@ -20,8 +20,9 @@ from cloudsim.auth.session import end_sessions
 from cloudsim.auth.ssh_keys import add_key, delete_key
 from cloudsim.competition.schedule import TaskSpec, check_spec
 from cloudsim.competition.season import SPEC_FIELDS
+from cloudsim.errors import Conflict
 from cloudsim.extensions import db
-from cloudsim.models import Role, Task, Team, User
+from cloudsim.models import Role, Task, Team, TeamInstance, User
 from cloudsim.people.service import create_team, create_user, update_user
 
 
@@ -36,6 +37,11 @@ class SyncResult:
 def apply_desired_state(actor: Actor, desired: dict[str, Any]) -> SyncResult:
     """Apply a master's desired state (admins: the master's credential); return the changes."""
     require_role(actor, Role.ADMIN, "apply a master's desired state")
+    if db.session.scalar(select(TeamInstance.id).limit(1)) is not None:
+        # a master's own users are the source of truth: a desired state would disable them
+        raise Conflict(
+            "this CloudSim is a master (it has team instances): it takes no desired state"
+        )
     result = SyncResult()
     team = _team(actor, desired.get("team"), result)
     _users(actor, desired["users"], team, result)

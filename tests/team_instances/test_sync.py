@@ -20,10 +20,12 @@ from cloudsim.models import (
     ConstellationState,
     Role,
     Task,
+    Team,
     TeamInstance,
     User,
 )
 from cloudsim.people.service import create_team, update_user
+from cloudsim.team_instances import service
 from cloudsim.team_instances.sync import desired_state
 from tests.competition.support import open_task
 from tests.conftest import csrf_token, make_user, running_app, token_for
@@ -132,3 +134,15 @@ def _logs_in(app: Flask, email: str) -> None:
         "/login", data={"email": email, "password": PASSWORD, "csrf_token": token}
     )
     assert answer.status_code == 302, answer.get_data(as_text=True)
+
+
+def test_a_master_takes_no_desired_state(app: Flask, team_a: Team) -> None:
+    admin = token_for(make_user(Role.ADMIN))
+    member = make_user(Role.USER, team_a)
+    service.deploy(SYSTEM, name="team-a", provider="local", team_id=team_a.id)
+    db.session.commit()
+    empty = {"team": None, "users": [], "tasks": []}
+    answer = app.test_client().put(DESIRED, json=empty, headers=admin)
+    assert answer.status_code == 409 and "master" in answer.get_json()["message"]
+    db.session.refresh(member)
+    assert member.active  # an empty desired state would have disabled every user
