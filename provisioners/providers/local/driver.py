@@ -293,8 +293,8 @@ class LocalNodeDriver(CloudSimNodeDriver):
         for network in self.ex_list_networks():
             self.ex_destroy_network(network)
         with self._store.lock():
-            if not self._store.read_nodes():  # image layers made for hosts never created
-                host.unmount_hosts_tmpfs(self._store.hosts_dir)
+            if not self._store.read_nodes() and layers.only_layers(self._store.hosts_dir):
+                host.unmount_hosts_tmpfs(self._store.hosts_dir)  # made before any host was
         leaked = sweep_prefix(self.prefix)
         with self._store.lock():
             self._store.remove_empty_dirs()

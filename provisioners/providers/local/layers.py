@@ -64,6 +64,13 @@ def image_layers(hosts_dir: Path) -> list[Path]:
     return sorted(done, key=lambda p: p.stat().st_mtime_ns, reverse=True)
 
 
+def only_layers(hosts_dir: Path) -> bool:
+    """Say whether the hosts' tmpfs holds image layers and nothing else (no host's files)."""
+    if not hosts_dir.is_mount():
+        return False
+    return all(entry.name == LAYERS_DIR for entry in hosts_dir.iterdir())
+
+
 def record_lowerdir(host_dir: Path) -> None:
     """Fix the host's lower layers (the layers now, then "/") unless fixed at an earlier boot."""
     lowerdir = host_dir / LOWERDIR_FILE
