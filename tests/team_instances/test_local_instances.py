@@ -168,6 +168,11 @@ def _until(condition: Callable[[], bool], what: str) -> None:
         raise AssertionError(f"{what}: sync jobs:\n{done}\ninstances: {rows}") from None
 
 
+def _behind(instance: TeamInstance) -> bool:
+    db.session.refresh(instance)
+    return "does not match the pinned" in (instance.sync_error or "")
+
+
 def _synced(config: Config, instance: TeamInstance, emails: set[str], task: str) -> bool:
     users = {u["email"] for u in _on(instance, config, "/users?page_size=500")}
     tasks = {t["name"] for t in _on(instance, config, "/tasks?page_size=500")}
@@ -204,6 +209,23 @@ def _propagation(
     assert any(member_a.email in c for c in on_a.sync_report["changed"]), on_a.sync_report
     assert _on(on_a, config, f"/users/{theirs['id']}")["role"] == "user"
     assert on_a.last_sync_at is not None and on_a.sync_error is None
+
+    # A cut between the master and A (here: A's certificate no longer matches the pin): the
+    # sync jobs for A fail and A's page says why it is behind; B still gets every change;
+    # once A answers again, the reconcile catches it up.
+    pinned, on_a.cert_fingerprint = on_a.cert_fingerprint, "00" * 32
+    db.session.commit()
+    late = make_user(Role.OFFICER)  # every instance's
+    wanted_b = {member_b.email, officer.email, late.email}
+    _until(lambda: _synced(config, on_b, wanted_b, "Driving for B"), "B while A is cut off")
+    _until(lambda: _behind(on_a), "A's page saying why it is behind")
+    on_a.cert_fingerprint = pinned
+    db.session.commit()
+    check_instances(config, [on_a.id])
+    db.session.commit()
+    assert on_a.sync_error is None and _synced(
+        config, on_a, wanted_a | {late.email}, "Walking for A, edited"
+    )
 
     # The member logs in to their instance in Chromium, with the master's password; sees
     # their team's task only; is locked out once disabled on the master.
