@@ -25,7 +25,13 @@ from cloudsim.models import ConstellationState, InstanceState, TeamInstance
 from cloudsim.providers.service import open_provider
 from cloudsim.team_instances import lifecycle
 from cloudsim.team_instances.client import Endpoint, InstanceError, call
-from cloudsim.team_instances.sync import desired_state, sync_failed, synced
+from cloudsim.team_instances.sync import (
+    desired_state,
+    release,
+    sync_failed,
+    sync_lock,
+    synced,
+)
 from constellations.plans.roles import CLOUDSIM_PORT
 
 PARALLEL = 8
@@ -93,21 +99,31 @@ def check_instances(
     instances = list(db.session.scalars(query.order_by(TeamInstance.id)))
     endpoints: dict[int, Endpoint] = {}
     desired: dict[int, dict[str, Any]] = {}
-    for instance in instances:
-        state = instance.constellation.state
-        if state == ConstellationState.ERROR:
-            lifecycle.failed(instance, instance.constellation.error or "its constellation failed")
-        elif state == ConstellationState.TERMINATED:
-            lifecycle.terminated(instance)
-        elif state == ConstellationState.READY:
-            try:
-                endpoints[instance.id] = connect(instance, config)
-                desired[instance.id] = desired_state(instance)
-            except (InstanceError, CloudSimError) as exc:
-                lifecycle.unreachable(instance, str(exc))
-    with ThreadPoolExecutor(max_workers=PARALLEL) as pool:
-        visits = pool.map(_visit, endpoints.values(), [desired[i] for i in endpoints])
-        answers = dict(zip(endpoints, visits, strict=True))
+    locks = []
+    try:
+        for instance in instances:
+            state = instance.constellation.state
+            if state == ConstellationState.ERROR:
+                error = instance.constellation.error or "its constellation failed"
+                lifecycle.failed(instance, error)
+            elif state == ConstellationState.TERMINATED:
+                lifecycle.terminated(instance)
+            elif state == ConstellationState.READY:
+                lock = sync_lock(instance.id)
+                if not lock.acquire(blocking=False):
+                    continue  # a sync job is at it: the next check looks again
+                locks.append(lock)
+                try:
+                    endpoints[instance.id] = connect(instance, config)
+                    desired[instance.id] = desired_state(instance)
+                except (InstanceError, CloudSimError) as exc:
+                    lifecycle.unreachable(instance, str(exc))
+        with ThreadPoolExecutor(max_workers=PARALLEL) as pool:
+            visits = pool.map(_visit, endpoints.values(), [desired[i] for i in endpoints])
+            answers = dict(zip(endpoints, visits, strict=True))
+    finally:
+        for lock in locks:
+            release(lock)
     for instance in instances:
         visit = answers.get(instance.id)
         if visit is None:

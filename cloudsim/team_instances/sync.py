@@ -15,13 +15,17 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
+import redis
 from flask import current_app
+from redis.exceptions import LockError
+from redis.lock import Lock
 from sqlalchemy import event, inspect, or_, select
 from sqlalchemy.orm import Session
 
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.competition.season import SPEC_FIELDS
+from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, Payload, job_kind
 from cloudsim.jobs.service import enqueue
@@ -40,6 +44,7 @@ from cloudsim.team_instances.client import InstanceError, call
 DIRTY = "cloudsim.team_instances.dirty"
 EVERY_TEAM = -1  # a change that concerns every instance (officers, keys of unknown owners)
 SYNC_JOB = "team_instance.sync"
+SYNC_LOCK_SECONDS = 60  # longest a sync waits for another one of the same instance
 
 
 def desired_state(instance: TeamInstance) -> dict[str, Any]:
@@ -119,7 +124,11 @@ def sync_instance(ctx: JobContext, payload: InstanceJob) -> None:
     if instance.state != InstanceState.READY:
         ctx.log(f"{instance.name} is {instance.state.value}: the periodic check catches it up")
         return
+    lock = sync_lock(instance.id)
+    if not lock.acquire(blocking_timeout=SYNC_LOCK_SECONDS):
+        raise InstanceError(f"another sync of {instance.name} held it for {SYNC_LOCK_SECONDS} s")
     try:
+        ctx.checkpoint()  # read the desired state as it is now, not as before the wait
         endpoint = endpoint_of(instance, current_app.config["CLOUDSIM"])
         ctx.mask(endpoint.token)
         answer = call(endpoint, "PUT", "/instance/desired-state", desired_state(instance))
@@ -127,8 +136,30 @@ def sync_instance(ctx: JobContext, payload: InstanceJob) -> None:
         sync_failed(instance, str(exc))
         ctx.checkpoint()
         raise
+    finally:
+        release(lock)
     synced(instance, answer)
     ctx.log(f"changed: {answer.get('changed') or 'nothing'}")
+
+
+def sync_lock(instance_id: int) -> Lock:
+    """Return the lock one instance's syncs take in turn (jobs and the reconcile alike).
+
+    Two pushes at once would race on the instance (both creating the same new user); one
+    after the other, each reads the desired state once it holds the lock, so the last one
+    to run pushes the newest. It expires by itself if its holder dies.
+    """
+    config: Config = current_app.config["CLOUDSIM"]
+    client = redis.Redis.from_url(config.effective_redis_url)
+    return client.lock(f"cloudsim:team-instance:{instance_id}:sync", timeout=SYNC_LOCK_SECONDS)
+
+
+def release(lock: Lock) -> None:
+    """Release a sync lock, if it is still ours (it may have expired)."""
+    try:
+        lock.release()
+    except LockError:
+        pass
 
 
 def _teams_of(row: object) -> set[int]:

@@ -3,8 +3,10 @@ it, the page's assign form; nothing reaches a machine here (no worker runs the l
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
+import threading
 import zipfile
 from pathlib import Path
 
@@ -15,15 +17,30 @@ from sqlalchemy import select
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import main
+from cloudsim.config import Config
 from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
 from cloudsim.extensions import db
+from cloudsim.jobs.runner import run_job
+from cloudsim.jobs.service import enqueue
 from cloudsim.launched_constellations.keys import instance_tls
 from cloudsim.launched_constellations.service import ssh_bundle
-from cloudsim.models import InstanceState, Job, Role, Team, TeamInstance
+from cloudsim.models import (
+    ConstellationState,
+    InstanceState,
+    Job,
+    JobState,
+    Role,
+    Team,
+    TeamInstance,
+    utcnow,
+)
 from cloudsim.team_instances import service
+from cloudsim.team_instances.client import Endpoint, InstanceError
+from cloudsim.team_instances.poll import check_instances
+from cloudsim.team_instances.sync import SYNC_JOB, InstanceJob, sync_lock
 from tests.competition.support import open_task
 from tests.conftest import csrf_token, log_in, make_user
-from tests.support.servers import RedisServer
+from tests.support.servers import RedisServer, wait_for
 
 
 def test_rules(app: Flask, team_a: Team, team_b: Team) -> None:
@@ -139,3 +156,47 @@ def test_the_ssh_bundle_gives_the_https_address_and_the_ca(app: Flask) -> None:
     bundle = zipfile.ZipFile(io.BytesIO(ssh_bundle(SYSTEM, constellation.id)[1]))
     assert "https://198.18.0.9:5000/" in bundle.read("cloudsim-admin.txt").decode()
     assert bundle.read("cloudsim-ca.crt").decode() == tls.ca_cert
+
+
+def test_syncs_of_one_instance_take_turns(app: Flask, team_a: Team) -> None:
+    ((instance, _),) = service.deploy(SYSTEM, name="team-a", provider="local", team_id=team_a.id)
+    instance.state = InstanceState.READY
+    instance.constellation.state = ConstellationState.READY
+    db.session.commit()
+    config = app.config["CLOUDSIM"]
+
+    def unreachable(_: TeamInstance, __: Config) -> Endpoint:
+        raise InstanceError("no route (this test's instance)")
+
+    lock = sync_lock(instance.id)
+    assert lock.acquire(blocking=False)
+    # The reconcile leaves an instance whose sync is under way alone ...
+    check_instances(config, [instance.id], unreachable)
+    assert instance.state == InstanceState.READY and instance.error is None
+    # ... and a sync job waits for it: it ends only after the lock is released.
+    job = enqueue(SYNC_JOB, SYSTEM, InstanceJob(instance.id))
+    db.session.commit()
+
+    def run() -> None:
+        with app.app_context():
+            with contextlib.suppress(Exception):
+                run_job(job.id)
+
+    worker = threading.Thread(target=run)
+    worker.start()
+    wait_for(lambda: _state(job.id) == JobState.RUNNING, 30, "the job to start")
+    released = utcnow()
+    lock.release()
+    worker.join(60)
+    db.session.expire_all()
+    done = db.session.get(Job, job.id)
+    assert done is not None and done.state == JobState.FAILED and done.finished_at is not None
+    assert done.finished_at >= released and "no public address" in (done.error or "")
+    check_instances(config, [instance.id], unreachable)  # free again: visited
+    assert instance.state == InstanceState.UNREACHABLE
+
+
+def _state(job_id: str) -> JobState | None:
+    db.session.expire_all()
+    job = db.session.get(Job, job_id)
+    return job.state if job is not None else None
