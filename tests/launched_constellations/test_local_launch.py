@@ -13,6 +13,8 @@ from cloudsim.launched_constellations import service
 from cloudsim.models import ConstellationState, JobState, MachineState
 from tests.launched_constellations.conftest import finished, leftovers
 
+pytestmark = pytest.mark.hosts
+
 
 def test_two_vrc_constellations_launch_verify_and_terminate_cleanly(
     constellations_app: Flask, constellations_worker: None, constellations_config: Config

@@ -17,6 +17,8 @@ from tests.launched_constellations.conftest import finished, leftovers
 from tests.support.servers import wait_for
 from tests.support.workers import kill_worker, worker_process
 
+pytestmark = pytest.mark.hosts
+
 
 def test_launch_resumes_after_the_worker_is_killed_mid_machines(
     constellations_app: Flask, constellations_config: Config, pytestconfig: pytest.Config

@@ -8,6 +8,7 @@ import itertools
 import re
 import zipfile
 
+import pytest
 from flask import Flask
 from libcloud.compute.base import NodeAuthSSHKey
 
@@ -23,6 +24,8 @@ from provisioners.remote.ssh import HostKeys, SSHExecutor, SSHTarget
 from tests.conftest import make_user, token_for
 from tests.launched_constellations.conftest import finished
 from tests.support.servers import wait_for
+
+pytestmark = pytest.mark.hosts
 
 
 def _ocus(config: Config, names: list[str]) -> tuple[SSHExecutor, list[SSHTarget]]:

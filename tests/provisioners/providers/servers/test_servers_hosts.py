@@ -20,6 +20,8 @@ from .conftest import Lab
 from .keys import KeyPair, make_key_pair
 from .shell import Shell
 
+pytestmark = pytest.mark.hosts
+
 TAGS = {"cloudsim:constellation": "c1", "cloudsim:role": "router"}
 # Leftovers of a deploy, as CloudSim's plans make them (firewall, software, services, VPN).
 DEPLOYED = """set -e

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from flask import Flask
 
 from cloudsim.auth.policy import SYSTEM
@@ -31,6 +32,7 @@ from .shell import Shell
 ORIGINALS = "cat /etc/hosts /etc/motd; iptables -S; hostname"
 
 
+@pytest.mark.hosts
 def test_a_simple_constellation_runs_on_a_server_and_leaves_nothing_behind(
     app: Flask, lab: Lab, state_dir: Path, ssh: Shell
 ) -> None:
