@@ -30,6 +30,7 @@ from pathlib import Path
 from celery.contrib.testing.worker import start_worker
 from flask import Flask
 
+from bench.provision import wait
 from cloudsim.app import create_app
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
@@ -39,7 +40,6 @@ from cloudsim.models import (
     Constellation,
     ConstellationState,
     InstanceState,
-    Job,
     Role,
     Task,
     TeamInstance,
@@ -235,7 +235,7 @@ def real_instances(folder: Path, redis: RedisServer) -> tuple[float, float, floa
                     for n, t in enumerate(teams)
                 ]
                 db.session.commit()
-                _wait([job.id for _, job in deployed])
+                wait([job.id for _, job in deployed])
                 ids = [instance.id for instance, _ in deployed]
                 deadline = time.monotonic() + 180
                 while not all(
@@ -266,18 +266,6 @@ def real_instances(folder: Path, redis: RedisServer) -> tuple[float, float, floa
         with app.app_context():
             open_provider("local", app.config["CLOUDSIM"]).driver.ex_sweep()  # type: ignore[attr-defined]
     return deploy, converged, reconcile
-
-
-def _wait(job_ids: list[str]) -> None:
-    while True:
-        db.session.expire_all()
-        jobs = [db.session.get(Job, job_id) for job_id in job_ids]
-        if all(job is not None and job.state.final for job in jobs):
-            failed = [job for job in jobs if job and job.state.value == "failed"]
-            if failed:
-                raise SystemExit(f"job failed: {failed[0].error}")
-            return
-        time.sleep(0.5)
 
 
 def main() -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import tempfile
 import time
+from datetime import datetime
 from pathlib import Path
 
 from celery.contrib.testing.worker import start_worker
@@ -40,6 +41,13 @@ def wait(job_ids: list[str]) -> float:
                 raise SystemExit(f"job failed: {failed[0].error}")
             return time.perf_counter() - started
         time.sleep(0.2)
+
+
+def _span(job_id: str) -> tuple[datetime, datetime]:
+    """Return when a finished job started and ended."""
+    job = db.session.get(Job, job_id)
+    assert job is not None and job.started_at is not None and job.finished_at is not None
+    return job.started_at, job.finished_at
 
 
 def main() -> None:
@@ -87,8 +95,8 @@ def main() -> None:
                     for n in names
                 ]
                 three = wait(jobs)
-                spans = [db.session.get(Job, job_id) for job_id in jobs]
-                overlap = min(j.finished_at for j in spans) - max(j.started_at for j in spans)  # type: ignore[union-attr,type-var]
+                spans = [_span(job_id) for job_id in jobs]
+                overlap = min(end for _, end in spans) - max(start for start, _ in spans)
                 terminate_one = wait([service.terminate(SYSTEM, "bench-one").id])
                 terminate_three = wait([service.terminate(SYSTEM, n).id for n in names])
     finally:
