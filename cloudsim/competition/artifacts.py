@@ -165,26 +165,32 @@ def file_sha256(path: Path) -> str:
 # ~3x faster on a big log; sha256sum where the machine's Python is older than 3.11
 _HASHER = (
     "python3 -c 'import hashlib, sys; "
-    'print(hashlib.file_digest(open(sys.argv[1], "rb"), "sha256").hexdigest())\' '
-    "{path} 2>/dev/null || sha256sum {path}"
+    '[print(hashlib.file_digest(open(p, "rb"), "sha256").hexdigest(), p) for p in sys.argv[1:]]\' '
+    '"$@" 2>/dev/null || sha256sum "$@"'
 )
+# the arguments that are regular files, as "$@"
+_EXISTING = 'set --; for f in {paths}; do if test -f "$f"; then set -- "$@" "$f"; fi; done'
+
+
+def remote_sha256s(executor: SSHExecutor, target: SSHTarget, paths: list[str]) -> dict[str, str]:
+    """Return the SHA-256 of each of the files on a machine that is there, in one command."""
+    existing = _EXISTING.format(paths=" ".join(shlex.quote(path) for path in paths))
+    result = executor.run(target, f"{existing}; test $# -eq 0 || {{ {_HASHER}; }}", timeout=3600)
+    pairs = (line.split(maxsplit=1) for line in result.stdout.splitlines() if line)
+    return {path: checksum for checksum, path in pairs}
 
 
 def remote_sha256(executor: SSHExecutor, target: SSHTarget, path: str) -> str | None:
     """Return the SHA-256 of a file on a machine, None when the file is not there."""
-    quoted = shlex.quote(path)
-    hasher = _HASHER.format(path=quoted)
-    result = executor.run(target, f"if test -f {quoted}; then {hasher}; fi", timeout=3600)
-    text = result.stdout.strip()
-    return text.split()[0] if text else None
+    return remote_sha256s(executor, target, [path]).get(path)
 
 
-def remote_size(executor: SSHExecutor, target: SSHTarget, path: str) -> int | None:
-    """Return the size of a file on a machine, None when the file is not there."""
-    quoted = shlex.quote(path)
-    result = executor.run(target, f"if test -f {quoted}; then stat -c %s -- {quoted}; fi")
-    text = result.stdout.strip()
-    return int(text) if text else None
+def remote_sizes(executor: SSHExecutor, target: SSHTarget, paths: list[str]) -> dict[str, int]:
+    """Return the size of each of the files on a machine that is there, in one command."""
+    existing = _EXISTING.format(paths=" ".join(shlex.quote(path) for path in paths))
+    result = executor.run(target, f"{existing}; test $# -eq 0 || stat -c '%s %n' -- \"$@\"")
+    sizes = (line.split(maxsplit=1) for line in result.stdout.splitlines() if line)
+    return {path: int(size) for size, path in sizes}
 
 
 def snapshot_bandwidth_log(executor: SSHExecutor, router: SSHTarget, run_id: int) -> None:
@@ -213,69 +219,115 @@ def collect_logs(
     checksum; return the problems with logs that could not be copied (missing optional logs
     are no problem)."""
     staging.mkdir(parents=True, exist_ok=True)
-    problems = []
+    problems: list[str] = []
     stored = {a.filename: a for a in run.artifacts}
     openssh = OpenSSH(executor.host_keys, log=executor.log)
-    for remote in RUN_LOGS:
-        target = reach.get(remote.machine)
-        if target is None:  # a constellation without a router has no bandwidth log
-            continue
-        path = f"{run_dir(run.id)}/{remote.filename}"
+    for machine, target in reach.items():
+        logs = [remote for remote in RUN_LOGS if remote.machine == machine]
+        paths = {remote.filename: f"{run_dir(run.id)}/{remote.filename}" for remote in logs}
         try:
-            size = remote_size(executor, target, path)
-            if size is None:
+            # two commands per machine, whatever the number of logs: sizes, then the
+            # checksums needed before copying (small logs, logs that may be stored already)
+            sizes = remote_sizes(executor, target, list(paths.values()))
+            checked = [
+                path
+                for filename, path in paths.items()
+                if path in sizes
+                and (sizes[path] < BULK_BYTES or _stored_size(stored, filename) == sizes[path])
+            ]
+            checksums = remote_sha256s(executor, target, checked) if checked else {}
+        except SSHError as exc:
+            for remote in logs:
+                problems.append(f"{remote.filename}: {exc}")
+                log(f"{remote.filename}: {exc}")
+            continue
+        for remote in logs:
+            path = paths[remote.filename]
+            if path not in sizes:
                 if remote.required:
                     problems.append(f"{remote.filename}: not found on {remote.machine}")
                 log(f"{remote.filename}: not on {remote.machine}")
                 continue
-            name = store.object_name(run.id, remote.filename)
-            artifact = stored.get(remote.filename)
-            if artifact is not None and artifact.size == size and store.holds(name, size):
-                checksum = remote_sha256(executor, target, path)
-                if artifact.sha256 == checksum:
-                    log(f"{remote.filename}: stored already ({checksum[:12]})")
-                    continue
-            local = staging / remote.filename
-            checksum, size = _fetch(executor, openssh, target, path, local, size)
-            store.keep(local, name)
-        except (SSHError, LogCollectionError, OSError) as exc:
-            problems.append(f"{remote.filename}: {exc}")
-            log(f"{remote.filename}: {exc}")
-            continue
-        if artifact is None:
-            artifact = Artifact(filename=remote.filename, kind=remote.kind)
-            run.artifacts.append(artifact)  # a second collection in this session sees it
-        artifact.location = name
-        artifact.sha256 = checksum
-        artifact.size = size
-        db.session.flush()
-        log(f"{remote.filename}: {size} bytes, sha256 {checksum[:12]} verified and stored")
+            problem = _collect_one(
+                run, remote, stored, store, staging / remote.filename, log,
+                _Source(executor, openssh, target, path, sizes[path], checksums.get(path)),
+            )  # fmt: skip
+            if problem:
+                problems.append(problem)
     return problems
 
 
-def _fetch(
-    executor: SSHExecutor,
-    openssh: OpenSSH,
-    target: SSHTarget,
-    path: str,
+@dataclass(frozen=True)
+class _Source:
+    """Where one log is and what its machine said of it."""
+
+    executor: SSHExecutor
+    openssh: OpenSSH
+    target: SSHTarget
+    path: str
+    size: int
+    checksum: str | None  # None: not asked yet (a big log is hashed while it is copied)
+
+
+def _stored_size(stored: dict[str, Artifact], filename: str) -> int | None:
+    artifact = stored.get(filename)
+    return artifact.size if artifact is not None else None
+
+
+def _collect_one(
+    run: Run,
+    remote: RemoteLog,
+    stored: dict[str, Artifact],
+    store: LogStore,
     local: Path,
-    size: int,
-) -> tuple[str, int]:
+    log: Callable[[str], None],
+    source: _Source,
+) -> str | None:
+    """Copy one log into the store unless it is there already; return the problem, if any."""
+    name = store.object_name(run.id, remote.filename)
+    artifact = stored.get(remote.filename)
+    try:
+        if (
+            artifact is not None
+            and artifact.sha256 == source.checksum
+            and store.holds(name, source.size)
+        ):
+            log(f"{remote.filename}: stored already ({artifact.sha256[:12]})")
+            return None
+        checksum, size = _fetch(source, local)
+        store.keep(local, name)
+    except (SSHError, LogCollectionError, OSError) as exc:
+        log(f"{remote.filename}: {exc}")
+        return f"{remote.filename}: {exc}"
+    if artifact is None:
+        artifact = Artifact(filename=remote.filename, kind=remote.kind)
+        run.artifacts.append(artifact)  # a second collection in this session sees it
+    artifact.location = name
+    artifact.sha256 = checksum
+    artifact.size = size
+    db.session.flush()
+    log(f"{remote.filename}: {size} bytes, sha256 {checksum[:12]} verified and stored")
+    return None
+
+
+def _fetch(source: _Source, local: Path) -> tuple[str, int]:
     """Copy a log into local (unless a staged copy from a previous try is whole); return its
     checksum as the machine computed it, and its size, once the copy is known to match."""
+    executor, target, path = source.executor, source.target, source.path
+    checksum = source.checksum
     if local.exists():  # downloaded by a try that failed to store it
-        checksum = remote_sha256(executor, target, path)
+        checksum = checksum or remote_sha256(executor, target, path)
         if checksum is not None and file_sha256(local) == checksum:
             return checksum, local.stat().st_size
         local.unlink()
-    if size < BULK_BYTES:
-        checksum = remote_sha256(executor, target, path)
+    if source.size < BULK_BYTES:
+        checksum = checksum or remote_sha256(executor, target, path)
         transfer = executor.get_file(target, path, local)
     else:
         # the machine hashes its copy while the bytes flow; ours is hashed as they arrive
         with ThreadPoolExecutor(max_workers=1, thread_name_prefix="sha256") as hashing:
             remote = hashing.submit(remote_sha256, executor, target, path)
-            transfer = openssh.download(target, path, local)
+            transfer = source.openssh.download(target, path, local)
             checksum = remote.result()
     if checksum is None or transfer.sha256 != checksum:
         local.unlink(missing_ok=True)  # the next try starts over, the resumed part included
