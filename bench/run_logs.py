@@ -123,14 +123,23 @@ def _bench(app: object, config: Config, size_mb: int) -> None:
         pipes = [_pipe(openssh, reach.sim, remote, staging / "pipe.bin", size_mb)]
         peak_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         started = time.perf_counter()
-        problems = collect_logs(run, reach.executor, reach.by_role(), store, staging, _quiet)
+        lines: list[tuple[float, str]] = []
+        problems = collect_logs(
+            run,
+            reach.executor,
+            reach.by_role(),
+            store,
+            staging,
+            lambda line: lines.append((time.perf_counter() - started, line)),
+        )
         seconds = time.perf_counter() - started
         if problems:
             raise SystemExit(f"collection failed: {problems}")
         collected = size_mb / seconds
         grown = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - peak_before
-        ssh_peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
         print(f"collection: {size_mb} MiB state log (and 6 small logs) in {seconds:.2f} s")
+        for at, line in lines:
+            print(f"  {at:5.2f} s  {line}")
         pipes.append(_pipe(openssh, reach.sim, remote, staging / "pipe.bin", size_mb))
         started = time.perf_counter()
         problems = collect_logs(run, reach.executor, reach.by_role(), store, staging, _quiet)
@@ -144,8 +153,7 @@ def _bench(app: object, config: Config, size_mb: int) -> None:
         )
         print(
             f"collector peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}"
-            f" MB (grew {grown / 1024:.0f} MB while collecting); ssh client peak RSS "
-            f"{ssh_peak / 1024:.0f} MB"
+            f" MB (grew {grown / 1024:.0f} MB while collecting {size_mb} MiB)"
         )
         print(f"collecting again (all stored): {again:.2f} s, nothing fetched")
 

@@ -13,7 +13,7 @@ import hashlib
 import os
 import shlex
 from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -222,39 +222,63 @@ def collect_logs(
     problems: list[str] = []
     stored = {a.filename: a for a in run.artifacts}
     openssh = OpenSSH(executor.host_keys, log=executor.log)
-    for machine, target in reach.items():
-        logs = [remote for remote in RUN_LOGS if remote.machine == machine]
-        paths = {remote.filename: f"{run_dir(run.id)}/{remote.filename}" for remote in logs}
-        try:
-            # two commands per machine, whatever the number of logs: sizes, then the
-            # checksums needed before copying (small logs, logs that may be stored already)
-            sizes = remote_sizes(executor, target, list(paths.values()))
-            checked = [
-                path
-                for filename, path in paths.items()
-                if path in sizes
-                and (sizes[path] < BULK_BYTES or _stored_size(stored, filename) == sizes[path])
-            ]
-            checksums = remote_sha256s(executor, target, checked) if checked else {}
-        except SSHError as exc:
-            for remote in logs:
-                problems.append(f"{remote.filename}: {exc}")
-                log(f"{remote.filename}: {exc}")
-            continue
-        for remote in logs:
-            path = paths[remote.filename]
-            if path not in sizes:
-                if remote.required:
-                    problems.append(f"{remote.filename}: not found on {remote.machine}")
-                log(f"{remote.filename}: not on {remote.machine}")
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="bulk-copy") as bulk:
+        for machine, target in reach.items():
+            logs = [remote for remote in RUN_LOGS if remote.machine == machine]
+            try:
+                sources = _ask(run, executor, openssh, target, logs, stored)
+            except SSHError as exc:
+                for remote in logs:
+                    problems.append(f"{remote.filename}: {exc}")
+                    log(f"{remote.filename}: {exc}")
                 continue
-            problem = _collect_one(
-                run, remote, stored, store, staging / remote.filename, log,
-                _Source(executor, openssh, target, path, sizes[path], checksums.get(path)),
-            )  # fmt: skip
-            if problem:
-                problems.append(problem)
+            for remote in logs:
+                if remote.filename not in sources:
+                    if remote.required:
+                        problems.append(f"{remote.filename}: not found on {remote.machine}")
+                    log(f"{remote.filename}: not on {remote.machine}")
+            # a big log starts copying at once; the small ones' round trips go meanwhile
+            early = {
+                filename: bulk.submit(_fetch, source, staging / filename)
+                for filename, source in sources.items()
+                if source.size >= BULK_BYTES
+                and not _stored_already(store, run, stored.get(filename), source)
+            }
+            for filename in sorted(sources, key=lambda name: name in early):
+                remote = next(r for r in logs if r.filename == filename)
+                problem = _collect_one(
+                    run, remote, stored, store, staging / filename, log,
+                    sources[filename], early.get(filename),
+                )  # fmt: skip
+                if problem:
+                    problems.append(problem)
     return problems
+
+
+def _ask(
+    run: Run,
+    executor: SSHExecutor,
+    openssh: OpenSSH,
+    target: SSHTarget,
+    logs: list[RemoteLog],
+    stored: dict[str, Artifact],
+) -> dict[str, _Source]:
+    """Return where each of a machine's logs that is there lives, with its size and, for
+    small logs and logs that may be stored already, its checksum: two commands in all."""
+    paths = {remote.filename: f"{run_dir(run.id)}/{remote.filename}" for remote in logs}
+    sizes = remote_sizes(executor, target, list(paths.values()))
+    checked = [
+        path
+        for filename, path in paths.items()
+        if path in sizes
+        and (sizes[path] < BULK_BYTES or _stored_size(stored, filename) == sizes[path])
+    ]
+    checksums = remote_sha256s(executor, target, checked) if checked else {}
+    return {
+        filename: _Source(executor, openssh, target, path, sizes[path], checksums.get(path))
+        for filename, path in paths.items()
+        if path in sizes
+    }
 
 
 @dataclass(frozen=True)
@@ -274,6 +298,14 @@ def _stored_size(stored: dict[str, Artifact], filename: str) -> int | None:
     return artifact.size if artifact is not None else None
 
 
+def _stored_already(store: LogStore, run: Run, artifact: Artifact | None, source: _Source) -> bool:
+    return (
+        artifact is not None
+        and artifact.sha256 == source.checksum
+        and store.holds(store.object_name(run.id, artifact.filename), source.size)
+    )
+
+
 def _collect_one(
     run: Run,
     remote: RemoteLog,
@@ -282,19 +314,17 @@ def _collect_one(
     local: Path,
     log: Callable[[str], None],
     source: _Source,
+    fetching: Future[tuple[str, int]] | None,
 ) -> str | None:
     """Copy one log into the store unless it is there already; return the problem, if any."""
     name = store.object_name(run.id, remote.filename)
     artifact = stored.get(remote.filename)
     try:
-        if (
-            artifact is not None
-            and artifact.sha256 == source.checksum
-            and store.holds(name, source.size)
-        ):
+        if fetching is None and _stored_already(store, run, artifact, source):
+            assert artifact is not None
             log(f"{remote.filename}: stored already ({artifact.sha256[:12]})")
             return None
-        checksum, size = _fetch(source, local)
+        checksum, size = fetching.result() if fetching is not None else _fetch(source, local)
         store.keep(local, name)
     except (SSHError, LogCollectionError, OSError) as exc:
         log(f"{remote.filename}: {exc}")
