@@ -185,12 +185,30 @@ def remote_sha256(executor: SSHExecutor, target: SSHTarget, path: str) -> str | 
     return remote_sha256s(executor, target, [path]).get(path)
 
 
-def remote_sizes(executor: SSHExecutor, target: SSHTarget, paths: list[str]) -> dict[str, int]:
-    """Return the size of each of the files on a machine that is there, in one command."""
-    existing = _EXISTING.format(paths=" ".join(shlex.quote(path) for path in paths))
-    result = executor.run(target, f"{existing}; test $# -eq 0 || stat -c '%s %n' -- \"$@\"")
-    sizes = (line.split(maxsplit=1) for line in result.stdout.splitlines() if line)
-    return {path: int(size) for size, path in sizes}
+def remote_inventory(
+    executor: SSHExecutor, target: SSHTarget, files: dict[str, int]
+) -> tuple[dict[str, int], dict[str, str]]:
+    """Return the size of each file (path: size to hash it at) that is on a machine, and the
+    checksum of those smaller than BULK_BYTES or of the given size, in one command."""
+    steps = ["set --"]
+    for path, hash_at in files.items():
+        quoted = shlex.quote(path)
+        steps.append(
+            f"if test -f {quoted}; then s=$(stat -c %s -- {quoted}); echo size $s {quoted}; "
+            f'if test $s -lt {BULK_BYTES} -o $s -eq {hash_at}; then set -- "$@" {quoted}; fi; fi'
+        )
+    steps.append(f"test $# -eq 0 || {{ {_HASHER}; }}")
+    result = executor.run(target, "; ".join(steps), timeout=3600)
+    sizes: dict[str, int] = {}
+    checksums: dict[str, str] = {}
+    for line in result.stdout.splitlines():
+        first, _, rest = line.partition(" ")
+        if first == "size":
+            size, _, path = rest.partition(" ")
+            sizes[path] = int(size)
+        elif rest:
+            checksums[rest.strip()] = first
+    return sizes, checksums
 
 
 def snapshot_bandwidth_log(executor: SSHExecutor, router: SSHTarget, run_id: int) -> None:
@@ -264,16 +282,10 @@ def _ask(
     stored: dict[str, Artifact],
 ) -> dict[str, _Source]:
     """Return where each of a machine's logs that is there lives, with its size and, for
-    small logs and logs that may be stored already, its checksum: two commands in all."""
+    small logs and logs that may be stored already, its checksum: one command in all."""
     paths = {remote.filename: f"{run_dir(run.id)}/{remote.filename}" for remote in logs}
-    sizes = remote_sizes(executor, target, list(paths.values()))
-    checked = [
-        path
-        for filename, path in paths.items()
-        if path in sizes
-        and (sizes[path] < BULK_BYTES or _stored_size(stored, filename) == sizes[path])
-    ]
-    checksums = remote_sha256s(executor, target, checked) if checked else {}
+    hash_at = {path: _stored_size(stored, filename) for filename, path in paths.items()}
+    sizes, checksums = remote_inventory(executor, target, hash_at)
     return {
         filename: _Source(executor, openssh, target, path, sizes[path], checksums.get(path))
         for filename, path in paths.items()
@@ -293,9 +305,9 @@ class _Source:
     checksum: str | None  # None: not asked yet (a big log is hashed while it is copied)
 
 
-def _stored_size(stored: dict[str, Artifact], filename: str) -> int | None:
+def _stored_size(stored: dict[str, Artifact], filename: str) -> int:
     artifact = stored.get(filename)
-    return artifact.size if artifact is not None else None
+    return artifact.size if artifact is not None else -1  # -1: no size a file has
 
 
 def _stored_already(store: LogStore, run: Run, artifact: Artifact | None, source: _Source) -> bool:
