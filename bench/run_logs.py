@@ -16,6 +16,7 @@ import os
 import resource
 import shlex
 import shutil
+import statistics
 import subprocess
 import tempfile
 import time
@@ -26,7 +27,7 @@ from celery.contrib.testing.worker import start_worker
 from cloudsim.app import create_app
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.competition.artifacts import RUN_LOGS, LogStore, collect_logs, run_dir
-from cloudsim.competition.jobs import machines
+from cloudsim.competition.jobs import Machines, machines
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service
@@ -42,7 +43,8 @@ def main() -> None:
         raise SystemExit("bench/run_logs.py needs root (the local provider makes namespaces)")
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size-mb", type=int, default=1024, help="size of the state log, MiB")
-    size_mb = parser.parse_args().size_mb
+    parser.add_argument("--rounds", type=int, default=3, help="pipe + collection pairs")
+    arguments = parser.parse_args()
     instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-logs-"))
     redis = RedisServer(instance / "redis")
     env = {
@@ -59,7 +61,7 @@ def main() -> None:
         with app.app_context():
             open_provider("local", config).driver.ex_sweep()  # type: ignore[attr-defined]
             db.create_all()
-            _bench(app, config, size_mb)
+            _bench(app, config, arguments.size_mb, arguments.rounds)
     finally:
         with app.app_context():
             # the bench's own prefix: whatever it left, also from a run that was killed
@@ -68,7 +70,7 @@ def main() -> None:
         shutil.rmtree(instance)  # the stored copy of the state log is as large as SIZE_MB
 
 
-def _bench(app: object, config: Config, size_mb: int) -> None:
+def _bench(app: object, config: Config, size_mb: int, rounds_wanted: int) -> None:
     team = Team(name="Bench")
     db.session.add(team)
     db.session.commit()
@@ -120,42 +122,65 @@ def _bench(app: object, config: Config, size_mb: int) -> None:
         openssh = OpenSSH(reach.executor.host_keys)
         remote = f"{run_dir(run.id)}/state.msgpack"
         print(f"load before: {_load()}")
-        pipes = [_pipe(openssh, reach.sim, remote, staging / "pipe.bin", size_mb)]
         peak_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        started = time.perf_counter()
-        lines: list[tuple[float, str]] = []
-        problems = collect_logs(
-            run,
-            reach.executor,
-            reach.by_role(),
-            store,
-            staging,
-            lambda line: lines.append((time.perf_counter() - started, line)),
-        )
-        seconds = time.perf_counter() - started
-        if problems:
-            raise SystemExit(f"collection failed: {problems}")
-        collected = size_mb / seconds
+        rounds = []
+        for number in range(1, rounds_wanted + 1):
+            piped = _pipe(openssh, reach.sim, remote, staging / "pipe.bin", size_mb)
+            if number > 1:  # forget the stored state log: the next collection copies it again
+                state = next(a for a in run.artifacts if a.filename == "state.msgpack")
+                store.driver.delete_object(
+                    store.driver.get_object(store.container_name, state.location)
+                )
+                run.artifacts.remove(state)  # the relationship deletes the orphan
+                db.session.flush()
+            collected = size_mb / _collect(run, reach, store, staging, size_mb, verbose=number == 1)
+            rounds.append((piped, collected))
+            print(
+                f"round {number}: pipe {piped:.0f} MiB/s, collection {collected:.0f} MiB/s, "
+                f"ratio {collected / piped:.2f}"
+            )
         grown = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - peak_before
-        print(f"collection: {size_mb} MiB state log (and 6 small logs) in {seconds:.2f} s")
-        for at, line in lines:
-            print(f"  {at:5.2f} s  {line}")
-        pipes.append(_pipe(openssh, reach.sim, remote, staging / "pipe.bin", size_mb))
         started = time.perf_counter()
-        problems = collect_logs(run, reach.executor, reach.by_role(), store, staging, _quiet)
+        if collect_logs(run, reach.executor, reach.by_role(), store, staging, _quiet):
+            raise SystemExit("collecting again failed")
         again = time.perf_counter() - started
-        reference = sum(pipes) / len(pipes)
         print(f"load after: {_load()}")
+        pipe = statistics.median(p for p, _ in rounds)
+        collection = statistics.median(c for _, c in rounds)
+        ratio = statistics.median(c / p for p, c in rounds)
         print(
-            f"OpenSSH pipe {reference:.0f} MiB/s (runs: {', '.join(f'{p:.0f}' for p in pipes)}) | "
-            f"CloudSim collection {collected:.0f} MiB/s | ratio {collected / reference:.2f} "
-            "(goal >= 0.75)"
+            f"median of {len(rounds)} rounds: OpenSSH pipe {pipe:.0f} MiB/s | CloudSim collection "
+            f"{collection:.0f} MiB/s | ratio {ratio:.2f} (each round's own pair; goal >= 0.75)"
         )
         print(
             f"collector peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}"
-            f" MB (grew {grown / 1024:.0f} MB while collecting {size_mb} MiB)"
+            f" MB (grew {grown / 1024:.0f} MB while collecting {size_mb} MiB x {len(rounds)})"
         )
         print(f"collecting again (all stored): {again:.2f} s, nothing fetched")
+
+
+def _collect(
+    run: Run, reach: Machines, store: LogStore, staging: Path, size_mb: int, verbose: bool
+) -> float:
+    """Collect the run's logs; return the seconds it took."""
+    started = time.perf_counter()
+    lines: list[tuple[float, str]] = []
+    problems = collect_logs(
+        run,
+        reach.executor,
+        reach.by_role(),
+        store,
+        staging,
+        lambda line: lines.append((time.perf_counter() - started, line)),
+    )
+    seconds = time.perf_counter() - started
+    if problems:
+        raise SystemExit(f"collection failed: {problems}")
+    if verbose:
+        print(f"collection: {size_mb} MiB state log (and the small logs) in {seconds:.2f} s")
+        for at, line in lines:
+            print(f"  {at:5.2f} s  {line}")
+    return seconds
 
 
 def _pipe(openssh: OpenSSH, sim: SSHTarget, remote: str, local: Path, size_mb: int) -> float:
@@ -165,7 +190,6 @@ def _pipe(openssh: OpenSSH, sim: SSHTarget, remote: str, local: Path, size_mb: i
         subprocess.run(argv, stdout=out, stdin=subprocess.DEVNULL, check=True)
         seconds = time.perf_counter() - started
     local.unlink()
-    print(f"OpenSSH pipe: {size_mb} MiB in {seconds:.2f} s")
     return size_mb / seconds
 
 
