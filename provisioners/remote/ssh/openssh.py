@@ -10,7 +10,6 @@ the folder afterwards, whatever happened.
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import os
 import re
@@ -31,10 +30,10 @@ from provisioners.remote.ssh.target import SSHTarget, openssh_private_key
 CIPHERS = "aes128-gcm@openssh.com,aes256-gcm@openssh.com,chacha20-poly1305@openssh.com"
 # the signature algorithms a recorded host key type is checked with
 _HOST_KEY_ALGORITHMS = {"ssh-rsa": "rsa-sha2-512,rsa-sha2-256"}
-_CHUNK = 1 << 20  # bytes read from ssh at a time: memory stays at one chunk
-_F_SETPIPE_SZ = 1031  # fcntl.F_SETPIPE_SZ (Python 3.10+ on Linux; named here for mypy)
+_CHUNK = 1 << 20  # bytes hashed at a time: memory stays at one chunk
 _STDERR_TAIL = 4096  # bytes of ssh's error output kept for the message
 _STOP_GRACE_SECONDS = 5.0
+_FOLLOW_WAIT_SECONDS = 0.002  # how long the hasher waits when it has caught up with ssh
 
 
 class OpenSSH:
@@ -101,27 +100,13 @@ class OpenSSH:
         size = offset
         with self._session(machine, remote) as (argv, errors), partial.open("ab") as out:
             with errors.open("ab") as stderr:  # ssh's own messages (-E) and the command's
+                # ssh writes straight into the file, as a plain pipe would; we hash the file
+                # as it grows (from the page cache): no pipe between us, one copy less
                 process = subprocess.Popen(
-                    argv,
-                    stdin=subprocess.DEVNULL,
-                    stdout=subprocess.PIPE,
-                    stderr=stderr,
-                    bufsize=0,
-                    env=_environment(),
+                    argv, stdin=subprocess.DEVNULL, stdout=out, stderr=stderr, env=_environment()
                 )
             try:
-                assert process.stdout is not None
-                source = process.stdout.fileno()
-                _widen_pipe(source)
-                buffer = bytearray(_CHUNK)
-                view = memoryview(buffer)
-                while count := os.readv(source, [buffer]):
-                    chunk = view[:count]
-                    digest.update(chunk)
-                    out.write(chunk)
-                    size += count
-                    if progress is not None:
-                        progress(size)
+                size = _follow(partial, offset, process, digest, progress)
                 exit_code = process.wait()
             finally:
                 _stop(process)
@@ -232,6 +217,37 @@ def _environment() -> dict[str, str]:
     return {key: value for key, value in os.environ.items() if not key.startswith("SSH_")}
 
 
+def _follow(
+    path: Path,
+    offset: int,
+    process: subprocess.Popen[bytes],
+    digest: hashlib._Hash,
+    progress: Callable[[int], None] | None,
+) -> int:
+    """Hash a file from offset as a process appends to it, until the process has ended and
+    the end is reached; return the file's size then."""
+    buffer = bytearray(_CHUNK)
+    view = memoryview(buffer)
+    with path.open("rb", buffering=0) as source:
+        source.seek(offset)
+        size = offset
+        while True:
+            ended = process.poll() is not None  # before reading: no byte written after is lost
+            count = source.readinto(buffer) or 0
+            if count:
+                digest.update(view[:count])
+                size += count
+                if progress is not None:
+                    progress(size)
+            elif ended:
+                return size
+            else:
+                try:  # the writer is ahead of nothing: wait a little for more, or its end
+                    process.wait(_FOLLOW_WAIT_SECONDS)
+                except subprocess.TimeoutExpired:
+                    pass
+
+
 def _hash_into(digest: hashlib._Hash, path: Path) -> int:
     size = 0
     with path.open("rb") as handle:
@@ -239,13 +255,6 @@ def _hash_into(digest: hashlib._Hash, path: Path) -> int:
             digest.update(chunk)
             size += len(chunk)
     return size
-
-
-def _widen_pipe(descriptor: int) -> None:
-    try:
-        fcntl.fcntl(descriptor, _F_SETPIPE_SZ, _CHUNK)
-    except OSError:
-        pass  # a smaller pipe only costs more wake-ups (limit: /proc/sys/fs/pipe-max-size)
 
 
 def _stop(process: subprocess.Popen[bytes]) -> None:
