@@ -23,6 +23,7 @@ from cloudsim.launched_constellations.keys import (
     stored_instance_ca,
 )
 from cloudsim.models import Constellation, ConstellationState, Job, Machine, Role, Team
+from cloudsim.models.lookup import by_id_or_name
 from cloudsim.providers.service import PROVIDERS
 from constellations.definition import (
     ConstellationKind,
@@ -54,16 +55,8 @@ def visible_constellations(actor: Actor) -> Select[Constellation]:
 
 def get_constellation(actor: Actor, ref: int | str) -> Constellation:
     """Return a constellation by id or name, if the actor may see it."""
-    if isinstance(ref, int) or ref.isdigit():
-        constellation = db.session.get(Constellation, int(ref))
-    else:
-        # the live one of that name, else the latest terminated one (history)
-        constellation = db.session.scalar(
-            select(Constellation)
-            .where(Constellation.name == ref)
-            .order_by(Constellation.state == ConstellationState.TERMINATED, Constellation.id.desc())
-            .limit(1)
-        )
+    # the live one of that name, else the latest terminated one (history)
+    constellation = by_id_or_name(Constellation, ref, ConstellationState.TERMINATED)
     if constellation is None:
         raise NotFound.of("constellation", ref)
     require_team_access(actor, constellation.team_id, "constellation", ref)

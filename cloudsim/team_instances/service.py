@@ -11,6 +11,7 @@ from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service as constellations
 from cloudsim.models import InstanceState, Job, Role, Team, TeamInstance
+from cloudsim.models.lookup import by_id_or_name
 from cloudsim.team_instances import lifecycle
 
 KIND = "cloudsim"  # the constellation kind that runs a CloudSim
@@ -31,15 +32,7 @@ def visible_instances(actor: Actor) -> Select[TeamInstance]:
 def get_instance(actor: Actor, ref: int | str) -> TeamInstance:
     """Return a team instance by id or name (admins)."""
     require_role(actor, Role.ADMIN, "see team instances")
-    if isinstance(ref, int) or ref.isdigit():
-        instance = db.session.get(TeamInstance, int(ref))
-    else:
-        instance = db.session.scalar(
-            select(TeamInstance)
-            .where(TeamInstance.name == ref)
-            .order_by(TeamInstance.state == InstanceState.TERMINATED, TeamInstance.id.desc())
-            .limit(1)
-        )
+    instance = by_id_or_name(TeamInstance, ref, InstanceState.TERMINATED)
     if instance is None:
         raise NotFound.of("team instance", ref)
     return instance

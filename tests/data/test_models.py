@@ -9,8 +9,11 @@ from flask import Flask
 from sqlalchemy import select, text
 from sqlalchemy.exc import IntegrityError
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.crypto import DecryptionError, Keyring
+from cloudsim.errors import NotFound
 from cloudsim.extensions import db
+from cloudsim.launched_constellations.service import get_constellation
 from cloudsim.models import (
     Artifact,
     Constellation,
@@ -25,6 +28,7 @@ from cloudsim.models import (
     Team,
     User,
 )
+from cloudsim.team_instances.service import get_instance
 from tests.conftest import make_user
 
 SSH_KEY = "\n".join(
@@ -170,3 +174,12 @@ def test_job_rows_keep_json_params(any_db_app: Flask) -> None:
     db.session.commit()
     db.session.expire_all()
     assert db.session.get(Job, job.id).params == {"machines": ["sim", "fc1"], "retries": 3}
+
+
+def test_a_ref_too_big_for_an_id_is_not_found_on_either_database(any_db_app: Flask) -> None:
+    db.session.add(Constellation(name="kept", kind="simple", provider="local"))
+    db.session.flush()
+    assert get_constellation(SYSTEM, "kept").name == "kept"
+    for get in (get_constellation, get_instance):
+        with pytest.raises(NotFound):  # PostgreSQL refused the number with a DataError (a 500)
+            get(SYSTEM, "99999999999")
