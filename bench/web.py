@@ -308,6 +308,7 @@ def measure(label: str, database_url: str | None, clients: int, rounds: int) -> 
     kinds = [visitors[KINDS[n % 3]] for n in range(clients)]
     with stack(env, instance) as base:
         queries = count_queries(app, visitors)
+        stack_floor(base, [kinds[n].email for n in range(clients)])
         started, machine, own = time.perf_counter(), busy_cpu_seconds(), time.process_time()
         timings = drive(base, {}, clients, rounds, lambda number: kinds[number])
         wall = time.perf_counter() - started
@@ -316,6 +317,19 @@ def measure(label: str, database_url: str | None, clients: int, rounds: int) -> 
     print(
         f"CPU while driving: the machine's {os.cpu_count()} cores {machine / wall:.2f} cores busy "
         f"(everything, other users included), the clients' own process {own / wall:.2f} cores"
+    )
+
+
+def stack_floor(base: str, emails: list[str], rounds: int = 100) -> None:
+    """Print what the same clients get asking only the login page: the stack's own limit."""
+    started = time.perf_counter()
+    timings = drive(base, {}, len(emails), rounds, lambda number: Visitor(emails[number], []))
+    wall = time.perf_counter() - started
+    values = sorted(v for vs in timings.values() for v in vs)
+    print(
+        f"the stack alone ({len(emails)} clients asking only {REFERENCE}, {len(values)} requests): "
+        f"{len(values) / wall:.0f} req/s, p50 {1000 * values[len(values) // 2]:.1f} ms, "
+        f"p95 {1000 * values[int(0.95 * (len(values) - 1))]:.1f} ms (each client's login included)"
     )
 
 
