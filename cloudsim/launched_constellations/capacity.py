@@ -6,6 +6,7 @@ than failing halfway when the machine runs out.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 from sqlalchemy import select, text
@@ -91,14 +92,21 @@ def pending_demand(provider: Provider) -> Demand:
 def room(provider_name: str, config: Config) -> Room | None:
     """Return the provider's room for launches, None when the provider does not know it."""
     provider = open_provider(provider_name, config)
-    if provider.driver.ex_capacity() is None:
+    capacity = provider.driver.ex_capacity()
+    if capacity is None:
         return None
-    capacity = provider.driver.ex_capacity(pending_demand(provider))
-    assert capacity is not None  # known a moment ago
-    kinds = {
-        name: fits(capacity, demand_of(load_kind(name, set(PLANS)))) for name in available_kinds()
-    }
+    pending = pending_demand(provider)
+    if pending != Demand():
+        capacity = provider.driver.ex_capacity(pending)
+        assert capacity is not None  # known a moment ago
+    kinds = {name: fits(capacity, demand) for name, demand in kind_demands().items()}
     return Room(provider_name, capacity, kinds)
+
+
+@functools.cache
+def kind_demands() -> dict[str, Demand]:
+    """Return what launching each shipped kind takes (package data: read once per process)."""
+    return {name: demand_of(load_kind(name, set(PLANS))) for name in available_kinds()}
 
 
 def visible_room(actor: Actor, provider_name: str, config: Config) -> Room | None:
