@@ -20,6 +20,7 @@ from flask import current_app
 from redis.exceptions import LockError
 from redis.lock import Lock
 from sqlalchemy import event, inspect, or_, select
+from sqlalchemy.orm import InstanceState as RowState
 from sqlalchemy.orm import Session
 
 from cloudsim.audit.service import record
@@ -42,6 +43,8 @@ from cloudsim.models import (
 from cloudsim.team_instances.client import InstanceError, call
 
 DIRTY = "cloudsim.team_instances.dirty"
+# what a user's desired state holds (desired_state): changing anything else syncs nothing
+SYNCED_USER_FIELDS = ("email", "name", "role", "active", "password_hash", "team_id")
 EVERY_TEAM = -1  # a change that concerns every instance (officers, keys of unknown owners)
 SYNC_JOB = "team_instance.sync"
 SYNC_LOCK_SECONDS = 60  # longest a sync waits for another one of the same instance
@@ -162,10 +165,21 @@ def release(lock: Lock) -> None:
         pass
 
 
-def _teams_of(row: object) -> set[int]:
-    """Return the teams whose instances a changed row concerns."""
+def _user_synced(user: User) -> bool:
+    """Return whether a changed user changed what instances hold (a login's time does not)."""
+    state: RowState[User] = inspect(user)
+    return any(state.attrs[name].history.has_changes() for name in SYNCED_USER_FIELDS)
+
+
+def _teams_of(row: object, created: bool = False) -> set[int]:
+    """Return the teams whose instances a changed (or created) row concerns."""
     if isinstance(row, User):
-        return {row.team_id} if row.role == Role.USER and row.team_id else {EVERY_TEAM}
+        if row.role == Role.USER and row.team_id:
+            return {row.team_id}
+        role_moved = not created and inspect(row).attrs.role.history.has_changes()
+        if row.role == Role.ADMIN and not role_moved:
+            return set()  # admins are not propagated; one who was an officer leaves every instance
+        return {EVERY_TEAM}
     if isinstance(row, SshKey):
         user = row.__dict__.get("user")  # never load during a flush
         if isinstance(user, User) and user.role == Role.USER and user.team_id:
@@ -184,7 +198,10 @@ def _teams_of(row: object) -> set[int]:
 @event.listens_for(Session, "after_flush")
 def _note_changes(session: Session, _context: object) -> None:
     teams: set[int] = session.info.setdefault(DIRTY, set())
-    for row in (*session.new, *session.dirty, *session.deleted):
+    changed = [row for row in session.dirty if not isinstance(row, User) or _user_synced(row)]
+    for row in session.new:
+        teams |= _teams_of(row, created=True)
+    for row in (*changed, *session.deleted):
         teams |= _teams_of(row)
         if isinstance(row, User):  # moved out of a team: the old one's instance too
             old: list[int | None] = list(inspect(row).attrs.team_id.history.deleted or ())

@@ -141,8 +141,21 @@ def test_a_change_starts_a_sync_job_per_instance_concerned(app: Flask, team_a: T
     task.name = "Renamed on the master"  # committed without a flush first
     db.session.commit()
     assert new_syncs() == {ours.id: 1, spare.id: 0}
-    make_user(Role.OFFICER)  # officers are on every instance
+    officer = make_user(Role.OFFICER)  # officers are on every instance
     assert new_syncs() == {ours.id: 1, spare.id: 1}
+    member = make_user(Role.USER, team_a)
+    assert new_syncs() == {ours.id: 1, spare.id: 0}
+    member.last_login_at = officer.last_login_at = utcnow()  # logging in changes no instance
+    db.session.commit()
+    assert new_syncs() == {ours.id: 0, spare.id: 0}
+    admin = make_user(Role.ADMIN)  # admins are not propagated
+    assert new_syncs() == {ours.id: 0, spare.id: 0}
+    officer.role = Role.ADMIN  # but an officer who becomes one leaves every instance
+    db.session.commit()
+    assert new_syncs() == {ours.id: 1, spare.id: 1}
+    admin.name = "Renamed admin"
+    db.session.commit()
+    assert new_syncs() == {ours.id: 0, spare.id: 0}
 
 
 def test_the_ssh_bundle_gives_the_https_address_and_the_ca(app: Flask) -> None:
