@@ -25,6 +25,7 @@ FEATURES = (
     "cloudsim.competition",
     "cloudsim.viewer",
     "cloudsim.team_instances",
+    "cloudsim.portal",
 )
 
 

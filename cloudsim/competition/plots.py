@@ -79,10 +79,10 @@ def line_chart(
         f'<line x1="{left}" y1="{py(0):.1f}" x2="{width - right}" y2="{py(0):.1f}" stroke="#888"/>',
         f'<line x1="{left}" y1="{top}" x2="{left}" y2="{py(0):.1f}" stroke="#888"/>',
         f'<text x="{left - 4}" y="{top + 4}" text-anchor="end" font-size="10">'
-        f"{escape(_short(y_max))}</text>",
+        f"{escape(short(y_max))}</text>",
         f'<text x="{left - 4}" y="{py(0):.1f}" text-anchor="end" font-size="10">0</text>',
         f'<text x="{width - right}" y="{height - 18}" text-anchor="end" font-size="10">'
-        f"{escape(_short(x_max))}</text>",
+        f"{escape(short(x_max))}</text>",
         f'<text x="{(left + width) / 2:.0f}" y="{height - 4}" text-anchor="middle" '
         f'font-size="11">{escape(x_label)}</text>',
         f'<text x="12" y="{(top + height - bottom) / 2:.0f}" font-size="11" '
@@ -95,7 +95,7 @@ def line_chart(
             f'<line x1="{left}" y1="{py(value):.1f}" x2="{width - right}" y2="{py(value):.1f}" '
             'stroke="#cf222e" stroke-dasharray="6 4" class="limit"/>'
             f'<text x="{width - right}" y="{py(value) - 4:.1f}" text-anchor="end" '
-            f'font-size="10" fill="#cf222e">{escape(label)} {escape(_short(value))}</text>'
+            f'font-size="10" fill="#cf222e">{escape(label)} {escape(short(value))}</text>'
         )
     for index, line in enumerate(series):
         colour = COLOURS[index % len(COLOURS)]
@@ -123,7 +123,8 @@ def _stepped(points: Sequence[tuple[float, float]]) -> list[tuple[float, float]]
     return stepped
 
 
-def _short(value: float) -> str:
+def short(value: float) -> str:
+    """Return a number in three significant digits with k, M or G."""
     for size, unit in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
         if abs(value) >= size:
             return f"{value / size:.3g}{unit}"

@@ -1,4 +1,5 @@
-"""Pages of the competition: tasks (schedule, import, export, start), runs live, leaderboard."""
+"""Pages of the competition: tasks (schedule, import, export, start), runs live (the leaderboard
+is the portal's)."""
 
 from __future__ import annotations
 
@@ -248,14 +249,6 @@ def stop(run_id: int) -> ResponseReturnValue:
 @login_required
 def download(run_id: int, artifact_id: int) -> ResponseReturnValue:
     return run_service.log_download(current_user, run_id, artifact_id)
-
-
-@bp.route("/leaderboard")
-@login_required
-def leaderboard() -> ResponseReturnValue:
-    return render_template(
-        "competition/leaderboard.html", standings=run_service.leaderboard(current_user)
-    )
 
 
 @bp.app_template_global("competition_now")

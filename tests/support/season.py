@@ -242,18 +242,22 @@ def score_log(events: int) -> str:
     return "".join(json.dumps(line) + "\n" for line in lines)
 
 
-def bandwidth_log(seconds: int) -> str:
-    """Return a router bandwidth log of `seconds` seconds of traffic both ways."""
+def bandwidth_log(
+    seconds: int, uplink_bytes: int = 400, caps: tuple[int, int] = (8_000_000, 64_000_000)
+) -> str:
+    """Return a router bandwidth log of `seconds` seconds of traffic both ways (about
+    `uplink_bytes` a second up), armed with (uplink, downlink) `caps`."""
     lines: list[dict[str, object]] = [
         {
             "time": "2026-06-17T16:00:00.000+00:00",
             "event": "armed",
-            "caps_bits": {"uplink": 8_000_000, "downlink": 64_000_000},
+            "caps_bits": {"uplink": caps[0], "downlink": caps[1]},
         }
     ]
     total = {"uplink": 0, "downlink": 0}
     for second in range(1, seconds + 1):
-        for direction, size in (("uplink", 400 + second % 7), ("downlink", 4000 + second % 11)):
+        sizes = (("uplink", uplink_bytes + second % 7), ("downlink", 4000 + second % 11))
+        for direction, size in sizes:
             total[direction] += size
             lines.append(
                 {

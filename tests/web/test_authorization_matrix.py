@@ -115,7 +115,17 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("competition.run_status", "GET"): (LOGIN, 200, 404, 200, 200),
     ("competition.stop", "POST"): (LOGIN, 409, 404, 409, 409),  # it has finished
     ("competition.download", "GET"): (LOGIN, 200, 404, 200, 200),
-    ("competition.leaderboard", "GET"): (LOGIN, 200, 200, 200, 200),
+    # the portal (team A's page; its finished run has no bandwidth log: 404 for all)
+    ("portal.index", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("portal.team", "GET"): (LOGIN, 200, 404, 200, 200),
+    ("portal.leaderboard", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("portal.standings", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("portal.figure_page", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("portal.bits_banked_csv", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("portal.uplink_score_csv", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("portal.bandwidth_csv", "GET"): (LOGIN, 404, 404, 404, 404),
+    ("portal.results_csv", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("portal.results_json", "GET"): (LOGIN, 403, 403, 200, 200),
     # the 3D viewer of team A's finished run (its logs hold no state log: nothing to replay;
     # nothing live: it has ended). A live run's refusals are in tests/viewer.
     ("viewer.view", "GET"): (LOGIN, 200, 404, 200, 200),

@@ -1,0 +1,69 @@
+"""A small season of runs with their logs stored, their figures read from those logs."""
+
+from __future__ import annotations
+
+import itertools
+from datetime import timedelta
+from pathlib import Path
+
+from csrouter.bandwidth_log import read_bandwidth_log
+
+from cloudsim.extensions import db
+from cloudsim.models import Run, RunState, Task, utcnow
+from tests.competition.support import store_log
+from tests.support.season import bandwidth_log, score_log
+
+_serial = itertools.count(1)
+
+
+def scored_run(
+    team_id: int,
+    tmp: Path,
+    *,
+    checkpoints: int,
+    uplink_bytes: int,
+    uplink_cap: int = 8_000_000,
+    seconds: int = 30,
+    state: RunState = RunState.FINISHED,
+) -> Run:
+    """Add a run of a fresh task with a score log and a bandwidth log stored, its score and
+    bits used read from them (as the stop job does); the caller's session is committed."""
+    n = next(_serial)
+    start = utcnow() - timedelta(hours=100 - n)
+    task = Task(
+        team_id=team_id,
+        name=f"Portal task {n}",
+        world="vrc_task_1",
+        run_config=1 + n % 5,
+        window_start=start,
+        window_stop=start + timedelta(hours=1),
+        uplink_bits=uplink_cap,
+        downlink_bits=64_000_000,
+    )
+    db.session.add(task)
+    db.session.flush()
+    folder = tmp / f"run-{n}"
+    folder.mkdir()
+    (folder / "score.jsonl").write_text(score_log(checkpoints))
+    (folder / "bandwidth.jsonl").write_text(
+        bandwidth_log(seconds, uplink_bytes, (uplink_cap, 64_000_000))
+    )
+    usage = read_bandwidth_log((folder / "bandwidth.jsonl").read_text().splitlines())
+    run = Run(
+        task_id=task.id,
+        team_id=team_id,
+        state=state,
+        score=checkpoints,
+        sim_seconds=10.0 * checkpoints,
+        uplink_bits_used=sum(usage["uplink"].bits_per_second),
+        downlink_bits_used=sum(usage["downlink"].bits_per_second),
+        end_reason="time_limit",
+        started_at=start,
+        finished_at=start + timedelta(minutes=30),
+    )
+    db.session.add(run)
+    db.session.flush()
+    for name in ("score.jsonl", "bandwidth.jsonl"):
+        store_log(run, folder / name, name)
+    db.session.commit()
+    return run

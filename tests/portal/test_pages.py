@@ -1,0 +1,101 @@
+"""The portal's pages as the README promises them: each team its own, officers all, exports."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+from flask import Flask
+
+from cloudsim.extensions import db
+from cloudsim.models import Constellation, RunState, TeamInstance, User
+from cloudsim.models.team_instances import InstanceState
+from tests.conftest import log_in
+from tests.portal.support import scored_run
+
+
+def test_a_team_sees_its_own_results_logs_and_cloudsim_and_nothing_of_another(
+    app: Flask, people: dict[str, User | None], tmp_path: Path
+) -> None:
+    user_a, user_b = people["user_a"], people["user_b"]
+    assert user_a is not None and user_b is not None
+    own = scored_run(user_a.team_id or 0, tmp_path, checkpoints=3, uplink_bytes=500)
+    other = scored_run(user_b.team_id or 0, tmp_path, checkpoints=1, uplink_bytes=900)
+    cloudsim = Constellation(name="team-a-cloudsim", kind="cloudsim", provider="local")
+    db.session.add(cloudsim)
+    db.session.flush()
+    db.session.add(
+        TeamInstance(
+            name="team-a",
+            team_id=user_a.team_id,
+            constellation_id=cloudsim.id,
+            state=InstanceState.READY,
+            url="https://198.51.100.7",
+        )
+    )
+    db.session.commit()
+    client = app.test_client()
+    log_in(client, user_a)
+
+    page = client.get("/portal").get_data(as_text=True)
+    assert "https://198.51.100.7" in page
+    assert f'data-run="{own.id}"' in page and f'data-run="{other.id}"' not in page
+    assert "Team B" not in page
+    assert f"/runs/{own.id}/logs/" in page  # its logs, to download
+    for url in (
+        f"/portal/teams/{user_b.team_id}",
+        f"/runs/{other.id}/bandwidth.csv",
+        f"/runs/{other.id}",
+    ):
+        assert client.get(url).status_code == 404, url
+    for url in ("/portal/figures", "/portal/figures/uplink-score.csv"):
+        body = client.get(url).get_data(as_text=True)
+        assert "Team A" in body and "Team B" not in body, url
+    assert client.get("/portal/results.csv").status_code == 403
+
+
+def test_officers_export_every_run_of_the_season(
+    app: Flask, people: dict[str, User | None], tmp_path: Path
+) -> None:
+    user_a, user_b, officer = people["user_a"], people["user_b"], people["officer"]
+    assert user_a is not None and user_b is not None and officer is not None
+    runs = [
+        scored_run(user_a.team_id or 0, tmp_path, checkpoints=2, uplink_bytes=300),
+        scored_run(user_b.team_id or 0, tmp_path, checkpoints=4, uplink_bytes=700),
+        scored_run(
+            user_b.team_id or 0, tmp_path, checkpoints=0, uplink_bytes=100, state=RunState.ERROR
+        ),
+    ]
+    client = app.test_client()
+    log_in(client, officer)
+    index = client.get("/portal").get_data(as_text=True)
+    assert 'data-team="Team A"' in index and 'data-team="Team B"' in index
+
+    exported = json.loads(client.get("/portal/results.json").get_data(as_text=True))
+    table = list(
+        csv.DictReader(io.StringIO(client.get("/portal/results.csv").get_data(as_text=True)))
+    )
+    assert [r["run_id"] for r in exported] == [r.id for r in runs]
+    assert [int(r["run_id"]) for r in table] == [r.id for r in runs]
+    for run, row, line in zip(runs, exported, table, strict=True):
+        expected = {
+            "team": run.team.name,
+            "task": run.task.name,
+            "world": "vrc_task_1",
+            "run_config": run.task.run_config,
+            "state": run.state.value,
+            "end_reason": "time_limit",
+            "score": run.score,
+            "uplink_bits_used": run.uplink_bits_used,
+            "uplink_cap_bits": 8_000_000,
+            "downlink_bits_used": run.downlink_bits_used,
+            "downlink_cap_bits": 64_000_000,
+            "source": "master",
+            "invalidated": False,
+            "started_at": run.started_at.isoformat(),
+            "finished_at": run.finished_at.isoformat() if run.finished_at else None,
+        }
+        assert {k: row[k] for k in expected} == expected
+        assert {k: line[k] for k in expected} == {k: str(v) for k, v in expected.items()}
