@@ -20,6 +20,7 @@ lint: install
 
 bench: install
 	$(BIN)/python -m bench.web
+	$(BIN)/python -m bench.portal
 	$(BIN)/python -m bench.provision
 	$(BIN)/python -m bench.season
 	$(BIN)/python -m bench.local_hosts
