@@ -119,6 +119,9 @@ class StandingSchema(Schema):
     checkpoints = fields.Int()
     uplink_share_left = fields.Float()
     seconds_left = fields.Float()
+    invalidated = fields.Int(
+        metadata={"description": "the team's finished runs an officer invalidated: not ranked"}
+    )
 
 
 @blp.route("/tasks")

@@ -209,6 +209,7 @@ def leaderboard(as_json: bool) -> None:
         lines = [
             f"{s.rank:3} {s.team:24} {s.checkpoints:3} checkpoints, "
             f"{100 * s.uplink_share_left:5.1f}% uplink left, {s.seconds_left:.0f} s left"
+            + (f" ({s.invalidated} run(s) invalidated)" if s.invalidated else "")
             for s in standings
         ]
         emit([s.__dict__ for s in standings], as_json, "\n".join(lines) or "no teams")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections import defaultdict
 
 from flask import Response, current_app
-from sqlalchemy import Select, select
+from sqlalchemy import Select, func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import selectinload
 
@@ -168,7 +168,8 @@ def live_run(team_id: int) -> Run | None:
 
 
 def leaderboard(actor: Actor) -> list[Standing]:
-    """Return the ranking of every team over their finished runs, as much as the actor may see."""
+    """Return the ranking of every team over their finished runs (not those an officer
+    invalidated), as much as the actor may see."""
     policy = current_app.config["CLOUDSIM"].leaderboard_for_users
     team_user = actor is not None and not actor.has_role(Role.OFFICER)
     if team_user and policy == "none":
@@ -189,7 +190,7 @@ def leaderboard(actor: Actor) -> list[Standing]:
             Task.timeout_s,
         )
         .join(Task, Run.task_id == Task.id)
-        .where(Run.state == RunState.FINISHED)
+        .where(Run.state == RunState.FINISHED, Run.invalidated_at.is_(None))
     )
     for run in finished:
         results[(run.team_id, names[run.team_id])].append(
@@ -202,7 +203,14 @@ def leaderboard(actor: Actor) -> list[Standing]:
                 complete=run.end_reason == "complete",
             )
         )
-    standings = rank(results)
+    invalidated = dict(
+        db.session.execute(  # type: ignore[arg-type]
+            select(Run.team_id, func.count())
+            .where(Run.state == RunState.FINISHED, Run.invalidated_at.is_not(None))
+            .group_by(Run.team_id)
+        ).all()
+    )
+    standings = rank(results, invalidated)
     if team_user and policy == "own":
         assert actor is not None
         standings = [s for s in standings if s.team_id == actor.team_id]

@@ -5,6 +5,7 @@ A run's score comes from its score log, read by drcsim's own reader (drcsim.rund
 Ranking: most checkpoints first; ties broken by the largest share of uplink bits left over
 all the team's runs, then by the most seconds left (summed over runs that reached every
 checkpoint: time left is only worth something once the task is done), then by name.
+Runs an officer invalidated are not given to the ranking at all; a standing only counts them.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ class Standing:
     checkpoints: int
     uplink_share_left: float
     seconds_left: float
+    invalidated: int = 0  # the team's finished runs an officer invalidated (not counted)
 
 
 def standing_figures(results: Iterable[RunResult]) -> tuple[int, int, float, float]:
@@ -57,8 +59,11 @@ def standing_figures(results: Iterable[RunResult]) -> tuple[int, int, float, flo
     )
 
 
-def rank(teams: dict[tuple[int, str], list[RunResult]]) -> list[Standing]:
-    """Order teams by the VRC rules; equal figures share a rank."""
+def rank(
+    teams: dict[tuple[int, str], list[RunResult]], invalidated: dict[int, int] | None = None
+) -> list[Standing]:
+    """Order teams by the VRC rules; equal figures share a rank. `invalidated` counts each
+    team's runs left out (shown beside its standing, never ranked)."""
     rows = []
     for (team_id, name), results in teams.items():
         runs, checkpoints, share, seconds = standing_figures(results)
@@ -81,6 +86,7 @@ def rank(teams: dict[tuple[int, str], list[RunResult]]) -> list[Standing]:
                 checkpoints=checkpoints,
                 uplink_share_left=share,
                 seconds_left=seconds,
+                invalidated=(invalidated or {}).get(team_id, 0),
             )
         )
     return standings

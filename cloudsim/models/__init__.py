@@ -6,6 +6,7 @@ from cloudsim.models.competition import Artifact, Run, RunState, ScoreEvent, Tas
 from cloudsim.models.jobs import Job, JobState
 from cloudsim.models.machines import Constellation, ConstellationState, Machine, MachineState
 from cloudsim.models.people import ApiToken, LoginSession, Role, SshKey, Team, User
+from cloudsim.models.portal import PortalRefusal, PortalUpload, UploadState
 from cloudsim.models.secrets import Secret, SecretKind
 from cloudsim.models.team_instances import InstanceState, TeamInstance
 
@@ -22,6 +23,8 @@ __all__ = [
     "LoginSession",
     "Machine",
     "MachineState",
+    "PortalRefusal",
+    "PortalUpload",
     "Role",
     "Run",
     "RunState",
@@ -32,6 +35,7 @@ __all__ = [
     "Task",
     "Team",
     "TeamInstance",
+    "UploadState",
     "User",
     "utcnow",
 ]

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import enum
 from datetime import datetime
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from sqlalchemy import BigInteger, ForeignKey, String, Text, UniqueConstraint
+from sqlalchemy import JSON, BigInteger, ForeignKey, String, Text, UniqueConstraint
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from cloudsim.models.base import Base, UTCDateTime, str_enum, utcnow
@@ -14,6 +14,7 @@ from cloudsim.models.base import Base, UTCDateTime, str_enum, utcnow
 if TYPE_CHECKING:
     from cloudsim.models.machines import Constellation
     from cloudsim.models.people import Team, User
+    from cloudsim.models.team_instances import TeamInstance
 
 
 class Task(Base):
@@ -61,9 +62,14 @@ class RunState(enum.StrEnum):
 
 
 class Run(Base):
-    """One attempt by a team at a task, on one of its constellations."""
+    """One attempt by a team at a task, on one of its constellations.
+
+    On a master, a run a team instance uploaded (cloudsim.portal) is a row like any other,
+    marked with the instance and the instance's own id for it (one row per pair).
+    """
 
     __tablename__ = "runs"
+    __table_args__ = (UniqueConstraint("instance_id", "remote_run_id"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"), index=True)
@@ -91,11 +97,25 @@ class Run(Base):
     started_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     running_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    # uploaded from a team instance (on the master): which one, its id there, what it declared
+    instance_id: Mapped[int | None] = mapped_column(
+        ForeignKey("team_instances.id", ondelete="SET NULL"), index=True
+    )
+    remote_run_id: Mapped[int | None] = mapped_column()
+    uploaded_at: Mapped[datetime | None] = mapped_column(UTCDateTime)  # its record arrived
+    # the logs the instance declared: [{"filename", "kind", "size", "sha256"}]
+    upload_manifest: Mapped[list[dict[str, Any]] | None] = mapped_column(JSON)
+    logs_complete_at: Mapped[datetime | None] = mapped_column(UTCDateTime)  # all logs checked
+    # an officer's word on the run (audited); an invalidated run does not count in the ranking
+    officer_note: Mapped[str | None] = mapped_column(Text)
+    invalidated_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    invalid_reason: Mapped[str | None] = mapped_column(Text)
 
     task: Mapped[Task] = relationship(back_populates="runs")
     team: Mapped[Team] = relationship()
     constellation: Mapped[Constellation | None] = relationship()
     started_by: Mapped[User | None] = relationship()
+    instance: Mapped[TeamInstance | None] = relationship()
     artifacts: Mapped[list[Artifact]] = relationship(
         back_populates="run", cascade="all, delete-orphan"
     )
