@@ -104,7 +104,7 @@ def scatter_with_caps(
     low = 10 ** math.floor(math.log10(min(positive))) if positive else 1.0
     high = 10 ** math.ceil(math.log10(max(positive))) if positive else 10.0
     high = max(high, low * 10)
-    y_max = max([y for *_, y in points] + [1.0]) * 1.1
+    y_max = math.floor(max([y for *_, y in points] + [0.0])) + 1.0  # scores are whole
 
     def px(x: float) -> float:
         share = (math.log10(max(x, low)) - math.log10(low)) / (math.log10(high) - math.log10(low))
@@ -114,10 +114,8 @@ def scatter_with_caps(
         return HEIGHT - BOTTOM - (HEIGHT - TOP - BOTTOM) * y / y_max
 
     parts = _frame(title, x_label, y_label, HEIGHT)
-    parts += [
-        _tick(LEFT - 4, TOP + 4, short(y_max), "end"),
-        _tick(LEFT - 4, HEIGHT - BOTTOM, "0", "end"),
-    ]
+    step = max(1, math.ceil(y_max / 10))
+    parts += [_tick(LEFT - 4, py(y) + 4, f"{y}", "end") for y in range(0, int(y_max) + 1, step)]
     decade = low
     while decade <= high:  # the log axis's decades
         parts.append(_tick(px(decade), HEIGHT - BOTTOM + 14, short(decade), "middle"))
