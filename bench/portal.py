@@ -10,9 +10,7 @@ Usage: python -m bench.portal [--db sqlite|postgresql|both] [--clients 20] [--ro
 
 from __future__ import annotations
 
-import argparse
 import os
-import re
 import statistics
 import tempfile
 import time
@@ -24,22 +22,22 @@ from flask import Flask
 from sqlalchemy import select
 
 from bench.web import (
-    PASSWORD,
-    REFERENCE,
     Visitor,
+    arguments,
     bench_env,
     count_queries,
     drive,
+    on_each_database,
     report,
     seed,
     seeded,
     stack,
+    visits,
 )
 from cloudsim.app import create_app
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.models import Run, Team, User
-from tests.support.servers import PostgresServer
 
 OFFICER_PAGES = [
     "/leaderboard",
@@ -103,21 +101,13 @@ def in_process(app: Flask, visitors: list[Visitor], repeat: int = 5) -> dict[str
     """Return each request's median milliseconds through Flask's test client (no HTTP, no
     other client): what the page itself costs, whatever the machine's load."""
     costs: dict[str, float] = {}
-    for me in visitors:
-        client = app.test_client()
-        page = client.get("/login").get_data(as_text=True)
-        token = re.search(r'name="csrf_token" type="hidden" value="([^"]+)"', page)
-        assert token
-        form = {"email": me.email, "password": PASSWORD, "csrf_token": token[1]}
-        assert client.post("/login", data=form).status_code == 302
-        for name, url in [*me.requests, (f"reference GET {REFERENCE} (anonymous)", REFERENCE)]:
-            http = app.test_client() if url == REFERENCE else client
-            times = []
-            for _ in range(repeat):
-                started = time.perf_counter()
-                assert http.get(url).status_code == 200, url
-                times.append(time.perf_counter() - started)
-            costs[name] = 1000 * statistics.median(times)
+    for name, url, http, headers in visits(app, visitors):
+        times = []
+        for _ in range(repeat):
+            started = time.perf_counter()
+            assert http.get(url, headers=headers).status_code == 200, url
+            times.append(time.perf_counter() - started)
+        costs[name] = 1000 * statistics.median(times)
     return costs
 
 
@@ -150,20 +140,7 @@ def measure(label: str, database_url: str | None, clients: int, rounds: int) -> 
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--db", choices=("sqlite", "postgresql", "both"), default="sqlite")
-    parser.add_argument("--clients", type=int, default=20)
-    parser.add_argument("--rounds", type=int, default=6)
-    args = parser.parse_args()
-    if args.db in ("sqlite", "both"):
-        measure("SQLite", None, args.clients, args.rounds)
-    if args.db in ("postgresql", "both"):
-        server = PostgresServer()  # the test harness's private cluster, stopped by its PID
-        try:
-            url = server.create_database("cloudsim_bench_portal")
-            measure("PostgreSQL (private, fsync off)", url, args.clients, args.rounds)
-        finally:
-            server.stop()
+    on_each_database(arguments(__doc__ or "", "sqlite", 6).parse_args(), measure)
 
 
 if __name__ == "__main__":

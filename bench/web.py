@@ -22,13 +22,14 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import requests
 from flask import Flask
+from flask.testing import FlaskClient
 from sqlalchemy import event, func, select
 
 from cloudsim import migrate
@@ -228,6 +229,23 @@ def drive(
     return timings
 
 
+def visits(
+    app: Flask, visitors: Iterable[Visitor]
+) -> Iterator[tuple[str, str, FlaskClient, dict[str, str]]]:
+    """Yield each visitor's requests (and the reference) as (name, url, logged-in test client,
+    API headers), for measuring in-process."""
+    for me in visitors:
+        client = app.test_client()
+        page = client.get("/login").get_data(as_text=True)
+        token = re.search(r'name="csrf_token" type="hidden" value="([^"]+)"', page)
+        assert token
+        form = {"email": me.email, "password": PASSWORD, "csrf_token": token[1]}
+        assert client.post("/login", data=form).status_code == 302
+        for name, url in [*me.requests, (f"reference GET {REFERENCE} (anonymous)", REFERENCE)]:
+            http = app.test_client() if url == REFERENCE else client
+            yield name, url, http, me.headers if url.startswith("/api/") else {}
+
+
 def count_queries(app: Flask, visitors: dict[str, Visitor]) -> dict[str, int]:
     """Return the SQL statements each request makes, counted in-process."""
     counts: dict[str, int] = {}
@@ -238,19 +256,10 @@ def count_queries(app: Flask, visitors: dict[str, Visitor]) -> dict[str, int]:
     listen = lambda *args: statements.append(args[2])  # noqa: E731
     event.listen(engine, "before_cursor_execute", listen)
     try:
-        for me in visitors.values():
-            client = app.test_client()
-            page = client.get("/login").get_data(as_text=True)
-            token = re.search(r'name="csrf_token" type="hidden" value="([^"]+)"', page)
-            assert token
-            form = {"email": me.email, "password": PASSWORD, "csrf_token": token[1]}
-            assert client.post("/login", data=form).status_code == 302
-            for name, url in [*me.requests, (f"reference GET {REFERENCE} (anonymous)", REFERENCE)]:
-                http = app.test_client() if url == REFERENCE else client
-                statements.clear()
-                headers = me.headers if url.startswith("/api/") else {}
-                http.get(url, headers=headers).get_data()  # a streamed answer queries as read
-                counts[name] = len(statements)
+        for name, url, http, headers in visits(app, visitors.values()):
+            statements.clear()
+            http.get(url, headers=headers).get_data()  # a streamed answer queries as read
+            counts[name] = len(statements)
     finally:
         event.remove(engine, "before_cursor_execute", listen)
     return counts
@@ -383,12 +392,23 @@ def report(
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--db", choices=("sqlite", "postgresql", "both"), default="both")
+    on_each_database(arguments(__doc__ or "", "both", 8).parse_args(), measure)
+
+
+def arguments(doc: str, db: str, rounds: int) -> argparse.ArgumentParser:
+    """Return the command line of a bench that loads pages on one database or both."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--db", choices=("sqlite", "postgresql", "both"), default=db)
     parser.add_argument("--clients", type=int, default=20)
-    parser.add_argument("--rounds", type=int, default=8)
+    parser.add_argument("--rounds", type=int, default=rounds)
     parser.add_argument("--database-url", help="a PostgreSQL to use instead of a private one")
-    args = parser.parse_args()
+    return parser
+
+
+def on_each_database(
+    args: argparse.Namespace, measure: Callable[[str, str | None, int, int], None]
+) -> None:
+    """Call measure(label, database URL, clients, rounds) on the databases args name."""
     if args.db in ("sqlite", "both"):
         measure("SQLite", None, args.clients, args.rounds)
     if args.db in ("postgresql", "both"):

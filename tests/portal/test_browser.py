@@ -58,6 +58,12 @@ def _page(browser: Browser, base: str, user: User) -> Page:  # noqa: F811
     return page
 
 
+def _people(people: dict[str, User | None]) -> tuple[User, User, User]:
+    user_a, user_b, officer = people["user_a"], people["user_b"], people["officer"]
+    assert user_a and user_b and officer
+    return user_a, user_b, officer
+
+
 def _csv(page: Page, link: str) -> list[dict[str, str]]:
     with page.expect_download() as info:
         page.get_by_role("link", name=link).first.click()
@@ -71,8 +77,7 @@ def test_the_figures_draw_the_logs_numbers_and_their_csv_hold_the_same(
     people: dict[str, User | None],
     tmp_path: Path,
 ) -> None:
-    user_a, user_b, officer = people["user_a"], people["user_b"], people["officer"]
-    assert user_a and user_b and officer
+    user_a, user_b, officer = _people(people)
     runs = [
         scored_run(user_a.team_id or 0, tmp_path, checkpoints=3, uplink_bytes=500),
         scored_run(
@@ -143,8 +148,7 @@ def test_the_leaderboard_follows_arriving_runs_and_breaks_a_tie_by_bits(
     people: dict[str, User | None],
     tmp_path: Path,
 ) -> None:
-    user_a, user_b = people["user_a"], people["user_b"]
-    assert user_a and user_b
+    user_a, user_b, _ = _people(people)
     # equal checkpoints: team B used fewer of its uplink bits, so it ranks first
     scored_run(user_a.team_id or 0, tmp_path, checkpoints=4, uplink_bytes=3000)
     scored_run(user_b.team_id or 0, tmp_path, checkpoints=4, uplink_bytes=1000)
