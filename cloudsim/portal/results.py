@@ -18,6 +18,7 @@ from cloudsim.models import Role, Run, RunState, Task, Team, TeamInstance
 from cloudsim.models.team_instances import InstanceState
 
 MASTER = "master"  # the source of a run finished on this CloudSim itself
+GONE = "a removed team instance"  # uploaded by an instance whose row was deleted since
 
 
 @dataclass(frozen=True)
@@ -44,6 +45,8 @@ class ResultRow:
     downlink_cap_bits: int
     source: str
     invalidated: bool
+    invalid_reason: str | None
+    officer_note: str | None
 
     @property
     def scoring(self) -> bool:
@@ -88,9 +91,15 @@ def _columns() -> Select[Any]:
             Task.uplink_bits.label("uplink_cap_bits"),
             Run.downlink_bits_used,
             Task.downlink_bits.label("downlink_cap_bits"),
+            TeamInstance.name.label("source"),
+            Run.remote_run_id,
+            Run.invalidated_at,
+            Run.invalid_reason,
+            Run.officer_note,
         )
         .join(Task, Run.task_id == Task.id)
         .join(Team, Run.team_id == Team.id)
+        .outerjoin(TeamInstance, Run.instance_id == TeamInstance.id)
     )
 
 
@@ -106,7 +115,10 @@ def results(actor: Actor, team_id: int | None = None) -> list[ResultRow]:
     for row in db.session.execute(query):
         values = row._asdict()
         values["state"] = values["state"].value
-        rows.append(ResultRow(**values, source=MASTER, invalidated=False))
+        uploaded = values.pop("remote_run_id") is not None
+        values["source"] = values["source"] or (GONE if uploaded else MASTER)
+        values["invalidated"] = values.pop("invalidated_at") is not None
+        rows.append(ResultRow(**values))
     return rows
 
 

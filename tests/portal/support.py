@@ -9,7 +9,8 @@ from pathlib import Path
 from csrouter.bandwidth_log import read_bandwidth_log
 
 from cloudsim.extensions import db
-from cloudsim.models import Run, RunState, Task, utcnow
+from cloudsim.models import Constellation, Run, RunState, Task, TeamInstance, utcnow
+from cloudsim.models.team_instances import InstanceState
 from tests.competition.support import store_log
 from tests.support.season import bandwidth_log, score_log
 
@@ -67,3 +68,20 @@ def scored_run(
         store_log(run, folder / name, name)
     db.session.commit()
     return run
+
+
+def team_instance(team_id: int, name: str, url: str) -> TeamInstance:
+    """Add a ready team instance of the team at url (its constellation a bare row)."""
+    constellation = Constellation(name=f"{name}-cloudsim", kind="cloudsim", provider="local")
+    db.session.add(constellation)
+    db.session.flush()
+    instance = TeamInstance(
+        name=name,
+        team_id=team_id,
+        constellation_id=constellation.id,
+        state=InstanceState.READY,
+        url=url,
+    )
+    db.session.add(instance)
+    db.session.commit()
+    return instance

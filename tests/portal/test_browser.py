@@ -16,7 +16,8 @@ from playwright.sync_api import Browser, Page, expect
 
 from cloudsim.competition.artifacts import LogStore
 from cloudsim.competition.plots import moving_average
-from cloudsim.models import Run, User
+from cloudsim.extensions import db
+from cloudsim.models import Run, User, utcnow
 from tests.portal.support import scored_run
 from tests.web.test_browser import browser, live_url, log_in_page  # noqa: F401
 
@@ -158,10 +159,15 @@ def test_the_leaderboard_follows_arriving_runs_and_breaks_a_tie_by_bits(
     expect(rows.nth(0)).to_have_attribute("data-team", "Team B")
     expect(rows.nth(1).locator(".rank")).to_have_text("2")
 
-    scored_run(user_a.team_id or 0, tmp_path, checkpoints=1, uplink_bytes=100)  # arrives
+    late = scored_run(user_a.team_id or 0, tmp_path, checkpoints=1, uplink_bytes=100)  # arrives
     expect(rows.nth(0)).to_have_attribute("data-team", "Team A", timeout=10_000)
     expect(rows.nth(0).locator(".checkpoints")).to_have_text("5")
     expect(rows.nth(0).locator(".runs")).to_have_text("2")
     expect(rows.nth(1).locator(".rank")).to_have_text("2")
+
+    late.invalidated_at = utcnow()  # an officer invalidates it: it no longer counts
+    db.session.commit()
+    expect(rows.nth(0)).to_have_attribute("data-team", "Team B", timeout=10_000)
+    expect(rows.nth(1).locator(".invalidated")).to_have_text("1 run(s) invalidated")
     assert page.problems == []  # type: ignore[attr-defined]
     page.context.close()

@@ -10,10 +10,9 @@ from pathlib import Path
 from flask import Flask
 
 from cloudsim.extensions import db
-from cloudsim.models import Constellation, RunState, TeamInstance, User
-from cloudsim.models.team_instances import InstanceState
+from cloudsim.models import RunState, User, utcnow
 from tests.conftest import log_in
-from tests.portal.support import scored_run
+from tests.portal.support import scored_run, team_instance
 
 
 def test_a_team_sees_its_own_results_logs_and_cloudsim_and_nothing_of_another(
@@ -23,19 +22,7 @@ def test_a_team_sees_its_own_results_logs_and_cloudsim_and_nothing_of_another(
     assert user_a is not None and user_b is not None
     own = scored_run(user_a.team_id or 0, tmp_path, checkpoints=3, uplink_bytes=500)
     other = scored_run(user_b.team_id or 0, tmp_path, checkpoints=1, uplink_bytes=900)
-    cloudsim = Constellation(name="team-a-cloudsim", kind="cloudsim", provider="local")
-    db.session.add(cloudsim)
-    db.session.flush()
-    db.session.add(
-        TeamInstance(
-            name="team-a",
-            team_id=user_a.team_id,
-            constellation_id=cloudsim.id,
-            state=InstanceState.READY,
-            url="https://198.51.100.7",
-        )
-    )
-    db.session.commit()
+    team_instance(user_a.team_id or 0, "team-a", "https://198.51.100.7")
     client = app.test_client()
     log_in(client, user_a)
 
@@ -68,6 +55,12 @@ def test_officers_export_every_run_of_the_season(
             user_b.team_id or 0, tmp_path, checkpoints=0, uplink_bytes=100, state=RunState.ERROR
         ),
     ]
+    # the first was invalidated by an officer; the second came from team B's instance
+    runs[0].invalidated_at, runs[0].invalid_reason = utcnow(), "ran the wrong world"
+    runs[0].officer_note = "checked with the team"
+    runs[1].instance_id = team_instance(user_b.team_id or 0, "team-b", "https://192.0.2.9").id
+    runs[1].remote_run_id = 7
+    db.session.commit()
     client = app.test_client()
     log_in(client, officer)
     index = client.get("/portal").get_data(as_text=True)
@@ -92,10 +85,19 @@ def test_officers_export_every_run_of_the_season(
             "uplink_cap_bits": 8_000_000,
             "downlink_bits_used": run.downlink_bits_used,
             "downlink_cap_bits": 64_000_000,
-            "source": "master",
-            "invalidated": False,
+            "source": "team-b" if run is runs[1] else "master",
+            "invalidated": run is runs[0],
+            "invalid_reason": run.invalid_reason,
+            "officer_note": run.officer_note,
             "started_at": run.started_at.isoformat(),
             "finished_at": run.finished_at.isoformat() if run.finished_at else None,
         }
         assert {k: row[k] for k in expected} == expected
-        assert {k: line[k] for k in expected} == {k: str(v) for k, v in expected.items()}
+        assert {k: line[k] for k in expected} == {
+            k: "" if v is None else str(v) for k, v in expected.items()
+        }
+    # the figures count only scoring runs: finished and not invalidated
+    text = client.get("/portal/figures/uplink-score.csv").get_data(as_text=True)
+    assert [int(r["run_id"]) for r in csv.DictReader(io.StringIO(text))] == [runs[1].id]
+    page = client.get(f"/portal/teams/{user_a.team_id}").get_data(as_text=True)
+    assert "ran the wrong world" in page and "checked with the team" in page

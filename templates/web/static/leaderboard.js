@@ -17,12 +17,13 @@
       tr.dataset.team = s.team;
       tr.append(cell(s.rank, "rank"), cell(s.team), cell(s.runs, "runs"),
         cell(s.checkpoints, "checkpoints"), cell((100 * s.uplink_share_left).toFixed(1) + "%", "share"),
-        cell(s.seconds_left.toFixed(0), "seconds"));
+        cell(s.seconds_left.toFixed(0), "seconds"),
+        cell(s.invalidated ? s.invalidated + " run(s) invalidated" : "", "invalidated"));
       body.append(tr);
     }
     if (!standings.length) {
       const td = cell("No teams yet.");
-      td.colSpan = 6;
+      td.colSpan = 7;
       body.append(document.createElement("tr"));
       body.lastChild.append(td);
     }
