@@ -13,7 +13,7 @@ from typing import Any
 from drcsim.commands import BALANCE
 from drcsim.controllers import CONTROLLERS
 from drcsim.errors import DrcsimError
-from drcsim.worlds import CONFIG_NAMES, WORLD_NAMES, load_world
+from drcsim.worlds import CONFIG_NAMES, WORLD_NAMES, load_world, read_world_file
 
 
 def _sensor_settings(pairs: list[str]) -> Any:
@@ -37,6 +37,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
     options = RunOptions(
         log_dir=args.log_dir,
+        world_document=read_world_file(args.world_file) if args.world_file else None,
         time_limit_s=args.time_limit,
         sensors=_sensor_settings(args.sensor),
         pose_rate_hz=args.pose_rate,
@@ -187,7 +188,13 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     serve = sub.add_parser("serve", help="serve a world over the network")
     serve.add_argument("--world", required=True, choices=WORLD_NAMES)
-    serve.add_argument("--config", default="1", choices=CONFIG_NAMES)
+    serve.add_argument("--config", default="1", help="run configuration (1..5 when shipped)")
+    serve.add_argument(
+        "--world-file",
+        type=Path,
+        default=None,
+        help="build the world from this document (JSON, checked) instead of the shipped copy",
+    )
     serve.add_argument("--bind", default="127.0.0.1", help="address to listen on")
     serve.add_argument("--port", type=int, default=7700, help="command port")
     serve.add_argument("--publish-port", type=int, default=None, help="topics (default port+1)")

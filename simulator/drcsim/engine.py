@@ -32,6 +32,7 @@ class RunOptions:
     """How to run a world: logs, time limit, sensors and where messages go."""
 
     log_dir: Path | None = None
+    world_document: dict[str, Any] | None = None  # None: the shipped copy
     time_limit_s: float | None = None
     sensors: SensorSettings = field(default_factory=SensorSettings)
     publish: Publisher | None = None
@@ -44,7 +45,9 @@ class Simulation:
 
     def __init__(self, world: str, config: str | int, options: RunOptions | None = None):
         self.options = options or RunOptions()
-        self.spec = load_world(world, config, self.options.time_limit_s)
+        self.spec = load_world(
+            world, config, self.options.time_limit_s, self.options.world_document
+        )
         self.client = new_client()
         self.scene = build_scene(self.client, self.spec)
         self.controller = JointController(
@@ -70,7 +73,7 @@ class Simulation:
         self.hose_start_z = self._hose_z()
         self.log: RunLog | None = None
         if self.options.log_dir is not None:
-            self.log = RunLog(self.options.log_dir, self.meta())
+            self.log = RunLog(self.options.log_dir, self.meta(), self.options.world_document)
         self.closed = False
         self._emit_score([{"event": "run_start", "sim_time": 0.0, "score": 0}])
 
@@ -81,6 +84,7 @@ class Simulation:
             "world": self.spec.name,
             "config": self.spec.config,
             "seed": self.spec.seed,
+            "world_digest": self.spec.digest,
             "time_limit_s": self.spec.time_limit_s,
             "timestep": TIMESTEP,
             "drcsim_version": __version__,

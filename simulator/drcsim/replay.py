@@ -8,8 +8,9 @@ from typing import Any
 
 from drcsim.engine import RunOptions, Simulation
 from drcsim.errors import ReplayMismatch
-from drcsim.rundir import read_final, read_meta
+from drcsim.rundir import WORLD, read_final, read_meta
 from drcsim.runlog import read_commands, read_states, state_digest
+from drcsim.worlds import read_world_file
 
 
 @dataclass(frozen=True)
@@ -39,7 +40,12 @@ def replay(log_dir: Path) -> ReplayResult:
     meta, final = read_meta(log_dir), read_final(log_dir)
     recorded_states = read_states(log_dir)
     checked = 0
-    sim = Simulation(meta["world"], meta["config"], RunOptions(time_limit_s=meta["time_limit_s"]))
+    handed = log_dir / WORLD
+    document = read_world_file(handed) if handed.exists() else None
+    options = RunOptions(time_limit_s=meta["time_limit_s"], world_document=document)
+    sim = Simulation(meta["world"], meta["config"], options)
+    if meta.get("world_digest", sim.spec.digest) != sim.spec.digest:
+        raise ReplayMismatch("the world document differs from the one the run was built from")
     if sim.spec.seed != meta["seed"]:
         raise ReplayMismatch(f"configuration seed is {sim.spec.seed}, the log says {meta['seed']}")
 

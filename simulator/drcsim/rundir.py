@@ -19,6 +19,8 @@ COMMANDS = "commands.jsonl"
 STATE = "state.msgpack"
 SCORE = "score.jsonl"
 FINAL = "final.json"
+# The world document the run was built from, when the orchestrator handed one over.
+WORLD = "world.json"
 # Every file a finished run leaves in its directory; FINAL is missing if the simulator died.
 FILES = (SCORE, STATE, COMMANDS, META, FINAL)
 # The score log's events worth keeping (run_start says nothing).
@@ -61,8 +63,10 @@ def serve_argv(
     allow: Sequence[str],
     log_dir: str,
     time_limit_s: float,
+    world_file: str | None = None,
 ) -> list[str]:
-    """Return the argv of `drcsim serve` for one run writing its logs to log_dir."""
+    """Return the argv of `drcsim serve` for one run writing its logs to log_dir (building
+    the world from `world_file` instead of the shipped copy, if given)."""
     return [
         drcsim,
         "serve",
@@ -77,6 +81,7 @@ def serve_argv(
         log_dir,
         "--time-limit",
         str(time_limit_s),
+        *(["--world-file", world_file] if world_file else []),
     ]
 
 

@@ -14,7 +14,7 @@ from typing import IO, Any
 
 import msgpack
 
-from drcsim.rundir import COMMANDS, FINAL, META, SCORE, STATE
+from drcsim.rundir import COMMANDS, FINAL, META, SCORE, STATE, WORLD
 
 
 def state_digest(vector: list[float]) -> str:
@@ -25,10 +25,14 @@ def state_digest(vector: list[float]) -> str:
 class RunLog:
     """Streams a run's logs to a directory; every file is appended and flushed as it goes."""
 
-    def __init__(self, directory: Path, meta: dict[str, Any]) -> None:
+    def __init__(
+        self, directory: Path, meta: dict[str, Any], world: dict[str, Any] | None = None
+    ) -> None:
         directory.mkdir(parents=True, exist_ok=True)
         self.directory = directory
         (directory / META).write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+        if world is not None:  # a replay rebuilds the run from the world it was handed
+            (directory / WORLD).write_text(json.dumps(world, indent=2) + "\n")
         self._commands: IO[str] = open(directory / COMMANDS, "w")
         self._state: IO[bytes] = open(directory / STATE, "wb")
         self._score: IO[str] = open(directory / SCORE, "w")
