@@ -66,6 +66,7 @@ RUN_LOGS = (
     RemoteLog("commands", "sim", rundir.COMMANDS),
     RemoteLog("state", "sim", rundir.STATE),
     RemoteLog("output", "sim", "simulator.log", required=False),
+    RemoteLog("world", "sim", rundir.WORLD, required=False),  # the document it was built from
     RemoteLog("bandwidth", "router", "bandwidth.jsonl"),
 )
 

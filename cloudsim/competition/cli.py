@@ -5,12 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
+from drcsim.worlds import WORLD_NAMES
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import ID, app_context, emit, reports_errors
 from cloudsim.competition import runs as run_service
 from cloudsim.competition import schedule, season
-from cloudsim.competition.worlds import worlds
 from cloudsim.extensions import db
 from cloudsim.models import Run, Task
 from cloudsim.people.service import find_team
@@ -55,7 +55,7 @@ def task() -> None:
 
 @task.command("add")
 @click.option("--name", required=True)
-@click.option("--world", required=True, type=click.Choice(sorted(worlds())))
+@click.option("--world", required=True, type=click.Choice(WORLD_NAMES))
 @click.option("--config", "run_config", default=1, show_default=True, type=int)
 @click.option("--start", required=True, help="Window opens, e.g. '2026-06-17 09:00'.")
 @click.option("--stop", required=True, help="Window closes.")

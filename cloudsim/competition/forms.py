@@ -19,9 +19,9 @@ from cloudsim.competition.schedule import (
     DEFAULT_TIMEOUT_S,
     DEFAULT_UPLINK_BITS,
 )
-from cloudsim.competition.worlds import worlds
 from cloudsim.models import Team
 from cloudsim.web.inputs import INT64_MAX, BoundedIntegerField
+from cloudsim.worlds.service import worlds
 
 ALL_TEAMS = "all"
 LOCAL_FORMAT = ["%Y-%m-%dT%H:%M", "%Y-%m-%dT%H:%M:%S"]

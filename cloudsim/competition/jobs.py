@@ -7,13 +7,14 @@ worker) that started it; the beat (`supervision.py`) decides when it ends, whoev
 
 from __future__ import annotations
 
+import json
 import shlex
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 from csrouter.bandwidth_log import read_bandwidth_log
-from drcsim.rundir import FINAL, SCORE, read_score_log, serve_argv
+from drcsim.rundir import FINAL, SCORE, WORLD, read_score_log, serve_argv
 from flask import current_app
 
 from cloudsim.competition import current_run, lifecycle
@@ -33,6 +34,7 @@ from cloudsim.launched_constellations import router_control
 from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair
 from cloudsim.models import Run, RunState, ScoreEvent, utcnow
+from cloudsim.worlds.service import world_for_run
 from provisioners.remote.ssh import ConnectPolicy, HostKeys, SSHError, SSHExecutor, SSHTarget
 
 ROUTER_FAULT = "router fault (OCU traffic is held until it is fixed): "
@@ -135,9 +137,12 @@ def machines(
 
 
 def simulator_command(run: Run, sim_ip: str, allow: list[str]) -> str:
-    """Return the shell command that starts the run's simulator as a transient service."""
+    """Return the shell command that writes the run's world document into its folder and
+    starts the simulator on it as a transient service."""
     task = run.task
     folder = run_dir(run.id)
+    world = world_for_run(task.world, task.run_config)
+    world_file = f"{folder}/{WORLD}"
     argv = [
         "systemd-run",
         f"--unit={unit_name(run.id)}",
@@ -154,9 +159,14 @@ def simulator_command(run: Run, sim_ip: str, allow: list[str]) -> str:
             allow=allow,
             log_dir=folder,
             time_limit_s=task.timeout_s,
+            world_file=world_file,
         ),
     ]
-    return f"mkdir -p {shlex.quote(folder)} && " + " ".join(map(shlex.quote, argv))
+    document = json.dumps(world.document, separators=(",", ":"))
+    return (
+        f"mkdir -p {shlex.quote(folder)} && printf '%s\\n' {shlex.quote(document)} > "
+        f"{shlex.quote(world_file)} && " + " ".join(map(shlex.quote, argv))
+    )
 
 
 def _allowed_networks(run: Run) -> list[str]:
@@ -211,9 +221,12 @@ def _start_simulator(reach: Machines, run: Run) -> None:
     if state in ("active", "ended"):
         reach.executor.log(reach.sim.name, f"simulator of run {run.id} already {state}")
         return
-    reach.executor.run(
-        reach.sim, simulator_command(run, reach.sim_ip, _allowed_networks(run)), timeout=60
+    command = simulator_command(run, reach.sim_ip, _allowed_networks(run))
+    world = world_for_run(run.task.world, run.task.run_config)
+    reach.executor.log(
+        reach.sim.name, f"world {world.name} version {world.version} ({world.digest[:12]})"
     )
+    reach.executor.run(reach.sim, command, timeout=60)
 
 
 @job_kind("run.stop", payload=RunJob)

@@ -11,10 +11,10 @@ from sqlalchemy.orm import selectinload
 
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import Actor, require_role, require_team_access
-from cloudsim.competition.worlds import check_world
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Role, Task, Team, utcnow
+from cloudsim.worlds.service import check_world
 
 NAME_MAX = 120
 MAX_TIMEOUT_S = 24 * 3600

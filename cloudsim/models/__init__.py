@@ -9,6 +9,7 @@ from cloudsim.models.people import ApiToken, LoginSession, Role, SshKey, Team, U
 from cloudsim.models.portal import PortalRefusal, PortalUpload, UploadState
 from cloudsim.models.secrets import Secret, SecretKind
 from cloudsim.models.team_instances import InstanceState, TeamInstance
+from cloudsim.models.worlds import World
 
 __all__ = [
     "ApiToken",
@@ -37,5 +38,6 @@ __all__ = [
     "TeamInstance",
     "UploadState",
     "User",
+    "World",
     "utcnow",
 ]

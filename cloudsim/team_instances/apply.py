@@ -3,9 +3,10 @@
 Idempotent: every item is compared with what is here and only differences are changed, so a
 repeated sync changes nothing. What the master manages is put back when it was changed here
 by hand (drift): its team, the users it lists (their role, team, name, active flag, password
-hash, SSH keys), and the tasks it made. Users it does not list (other than admins: its own
-credential and any local admin) are disabled; tasks made here by hand are reported, not
-touched. The answer says what changed and what was reported.
+hash, SSH keys), the tasks it made, and every world definition (a world changed here by hand
+is put back to the master's document and version). Users it does not list (other than
+admins: its own credential and any local admin) are disabled; tasks made here by hand are
+reported, not touched. The answer says what changed and what was reported.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from drcsim.worlds import document_digest
 from sqlalchemy import select
 
 from cloudsim.auth.policy import Actor, require_role
@@ -20,10 +22,11 @@ from cloudsim.auth.session import end_sessions
 from cloudsim.auth.ssh_keys import add_key, delete_key
 from cloudsim.competition.schedule import TaskSpec, check_spec
 from cloudsim.competition.season import SPEC_FIELDS
-from cloudsim.errors import Conflict
+from cloudsim.errors import Conflict, InvalidInput
 from cloudsim.extensions import db
 from cloudsim.models import Role, Task, Team, TeamInstance, User
 from cloudsim.people.service import create_team, create_user, update_user
+from cloudsim.worlds.service import checked, put_world, stored_worlds
 
 
 @dataclass
@@ -45,6 +48,8 @@ def apply_desired_state(actor: Actor, desired: dict[str, Any]) -> SyncResult:
     result = SyncResult()
     team = _team(actor, desired.get("team"), result)
     _users(actor, desired["users"], team, result)
+    if desired.get("worlds") is not None:  # before the tasks: they are checked against them
+        _worlds(desired["worlds"], result)
     _tasks(desired["tasks"], team, result)
     db.session.flush()
     return result
@@ -114,6 +119,20 @@ def _keys(user: User, wanted: list[dict[str, str]], result: SyncResult) -> None:
         if spec["public_key"] not in have:
             key = add_key(user, spec["public_key"], spec["name"])
             result.changed.append(f"user {user.email}: SSH key {key.fingerprint} added")
+
+
+def _worlds(wanted: list[dict[str, Any]], result: SyncResult) -> None:
+    for spec in wanted:
+        document = checked(spec["document"])  # the simulator here must be able to load it
+        if document["name"] != spec["name"] or document_digest(document) != spec["digest"]:
+            raise InvalidInput(f"world {spec['name']!r}: the document does not match its digest")
+        if put_world(spec["name"], spec["version"], document):
+            result.changed.append(f"world {spec['name']}: version {spec['version']}")
+    listed = {spec["name"] for spec in wanted}
+    for world in stored_worlds():
+        if world.name not in listed:
+            result.reported.append(f"world {world.name} is not the master's")
+    db.session.flush()
 
 
 def _tasks(wanted: list[dict[str, Any]], team: Team | None, result: SyncResult) -> None:

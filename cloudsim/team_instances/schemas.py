@@ -96,6 +96,19 @@ class DesiredTaskSchema(Schema):
     order = fields.Int(required=True, validate=validate.Range(min=-10_000, max=10_000))
 
 
+class DesiredWorldSchema(Schema):
+    name = fields.Str(required=True, validate=validate.Length(min=1, max=64))
+    version = fields.Int(required=True, validate=validate.Range(min=1, max=2**31 - 1))
+    digest = fields.Str(
+        required=True,
+        validate=validate.Regexp(r"^[0-9a-f]{64}$"),
+        metadata={"description": "SHA-256 of the document's canonical JSON"},
+    )
+    document = fields.Dict(
+        required=True, metadata={"description": "the world document (drcsim's format)"}
+    )
+
+
 class DesiredStateSchema(Schema):
     team = fields.Str(
         allow_none=True,
@@ -108,6 +121,12 @@ class DesiredStateSchema(Schema):
     )
     tasks = fields.List(
         fields.Nested(DesiredTaskSchema), required=True, validate=validate.Length(max=10_000)
+    )
+    worlds = fields.List(
+        fields.Nested(DesiredWorldSchema),
+        load_default=None,
+        validate=validate.Length(max=100),
+        metadata={"description": "every world definition (absent: the worlds are left alone)"},
     )
 
 

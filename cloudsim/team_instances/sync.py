@@ -1,11 +1,11 @@
 """The master's side of propagation: what each instance must have (desired state), the job
 that pushes it, and the hook that starts that job for the instances a change concerns.
 
-A change to a user, an SSH key, a task or a team starts one `team_instance.sync` job per
-ready instance concerned, when the change commits (an officer or a key change: every
-instance). The periodic check (`poll.check_instances`) pushes the same state to every ready
-instance too: that is the reconcile, which puts back what was changed on an instance by
-hand and catches up an instance that was unreachable. A failure is the instance's alone
+A change to a user, an SSH key, a task, a team or a world starts one `team_instance.sync`
+job per ready instance concerned, when the change commits (an officer, a key or a world
+change: every instance). The periodic check (`poll.check_instances`) pushes the same state
+to every ready instance too: that is the reconcile, which puts back what was changed on an
+instance by hand and catches up an instance that was unreachable. A failure is the instance's alone
 (its own job, its own call with a short timeout) and is shown on its page.
 """
 
@@ -38,6 +38,7 @@ from cloudsim.models import (
     Team,
     TeamInstance,
     User,
+    World,
     utcnow,
 )
 from cloudsim.team_instances.client import InstanceError, call
@@ -52,7 +53,7 @@ SYNC_LOCK_SECONDS = 60  # longest a sync waits for another one of the same insta
 
 def desired_state(instance: TeamInstance) -> dict[str, Any]:
     """Return what the instance must have: its team, its members and the officers (with
-    their password hashes and SSH keys), and the team's tasks; JSON-ready."""
+    their password hashes and SSH keys), the team's tasks and every world; JSON-ready."""
     team = instance.team
     wanted = User.role == Role.OFFICER
     if team is not None:
@@ -79,6 +80,10 @@ def desired_state(instance: TeamInstance) -> dict[str, Any]:
         "tasks": [
             {"key": f"m{task.id}"} | {name: _plain(getattr(task, name)) for name in SPEC_FIELDS}
             for task in tasks
+        ],
+        "worlds": [
+            {"name": w.name, "version": w.version, "digest": w.digest, "document": w.document}
+            for w in db.session.scalars(select(World).order_by(World.name))
         ],
     }
 
@@ -189,6 +194,8 @@ def _teams_of(row: object, created: bool = False) -> set[int]:
         return {row.team_id}
     if isinstance(row, Team):
         return {row.id}
+    if isinstance(row, World):
+        return {EVERY_TEAM}
     if isinstance(row, TeamInstance) and row.team_id:
         # assigned to a team; not its own health or sync records, which would loop
         return {row.team_id} if inspect(row).attrs.team_id.history.has_changes() else set()
