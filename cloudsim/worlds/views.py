@@ -9,6 +9,7 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 from flask_wtf import FlaskForm
 from flask_wtf.file import FileField
+from werkzeug.datastructures import FileStorage
 from wtforms import TextAreaField
 
 from cloudsim.auth.policy import role_required
@@ -29,7 +30,7 @@ class WorldUploadForm(FlaskForm):
     def document_text(self) -> str:
         """Return the uploaded or pasted text."""
         upload = self.file.data
-        if upload is not None and getattr(upload, "filename", ""):
+        if isinstance(upload, FileStorage) and upload.filename:
             raw = upload.read(service.MAX_DOCUMENT_BYTES + 1)
             return raw.decode("utf-8", errors="replace")
         return self.text.data or ""

@@ -5,6 +5,7 @@ timeout, logs with matching checksums, score and leaderboard; refusals; a worker
 from __future__ import annotations
 
 import hashlib
+import json
 import shlex
 import threading
 from collections.abc import Callable, Iterator
@@ -14,6 +15,7 @@ from pathlib import Path
 import pytest
 from celery.contrib.testing.worker import start_worker
 from csrouter.bandwidth_log import read_bandwidth_log
+from drcsim.worlds import document_digest, shipped_document
 from flask import Flask
 from playwright.sync_api import Browser, expect
 from werkzeug.serving import make_server
@@ -34,6 +36,7 @@ from cloudsim.extensions import db
 from cloudsim.launched_constellations import service as constellations
 from cloudsim.models import JobState, Role, Run, RunState, Team, User, utcnow
 from cloudsim.people import service as people_service
+from cloudsim.worlds.service import update_world
 from tests.conftest import make_user, token_for
 from tests.launched_constellations.conftest import finished
 from tests.support.servers import wait_for
@@ -95,6 +98,12 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
         db.session.commit()
         done = finished(job.id)
         assert done.state == JobState.SUCCEEDED, f"{done.error}\n{done.log[:6000]}"
+
+    # the run is built from the world CloudSim holds (here an updated one), not drcsim's copy
+    world = shipped_document("vrc_task_2")
+    world["title"] += ", as this CloudSim holds it"
+    update_world(SYSTEM, world)
+    db.session.commit()
 
     page = browser.new_context().new_page()
     log_in_page(page, live_url, officer)
@@ -172,6 +181,7 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     assert run.uplink_bits_used >= 0 and run.active_constellation_id is None
 
     stored = {a.filename: a for a in run.artifacts}
+    handed: dict[str, dict] = {}
     expected = [log for log in RUN_LOGS if kind == "vrc" or log.machine == "sim"]
     assert {log.filename for log in expected} == set(stored)
     client = constellations_app.test_client()
@@ -186,6 +196,10 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
             body = client.get(f"/api/v1/runs/{run.id}/logs/{artifact.id}", headers=headers)
             assert body.status_code == 200
             assert hashlib.sha256(body.data).hexdigest() == artifact.sha256 == on_machine
+            if artifact.filename in ("world.json", "meta.json"):
+                handed[artifact.filename] = json.loads(body.data)
+    assert document_digest(handed["world.json"]) == document_digest(world)
+    assert handed["meta.json"]["world_digest"] == document_digest(world)
     # collecting again copies nothing: every log is stored with the same checksum
     lines: list[str] = []
     with machines(run, constellations_config) as reach:

@@ -287,6 +287,7 @@ def team_urls(app: Flask, team_id: int, endpoints: Iterable[str]) -> dict[str, s
         "task_id": run.task_id,
         "run_id": run.id,
         "artifact_id": run.artifacts[0].id,
+        "name": "vrc_task_1",  # a world
     }
     instance = db.session.scalar(select(TeamInstance.id).order_by(TeamInstance.id.desc()))
     if instance is not None:  # a season with team instances (their pages need one)

@@ -14,6 +14,7 @@ from typing import Any, cast
 import pytest
 from cryptography import x509
 from cryptography.hazmat.primitives import serialization
+from drcsim.worlds import document_digest, shipped_document
 from flask import Flask
 from playwright.sync_api import expect, sync_playwright
 from sqlalchemy import select
@@ -32,6 +33,7 @@ from cloudsim.people.service import create_team, update_user
 from cloudsim.providers.service import open_provider
 from cloudsim.team_instances.client import call
 from cloudsim.team_instances.poll import check_instances, endpoint_of
+from cloudsim.worlds.service import update_world
 from tests.competition.support import open_task
 from tests.conftest import PASSWORD, csrf_token, log_in, make_user, token_for
 from tests.launched_constellations.conftest import finished, leftovers
@@ -168,6 +170,11 @@ def _until(condition: Callable[[], bool], what: str) -> None:
         raise AssertionError(f"{what}: sync jobs:\n{done}\ninstances: {rows}") from None
 
 
+def _world(config: Config, instance: TeamInstance) -> dict[str, Any]:
+    found: dict[str, Any] = _on(instance, config, "/worlds/vrc_task_1")
+    return found
+
+
 def _behind(instance: TeamInstance) -> bool:
     db.session.refresh(instance)
     return "does not match the pinned" in (instance.sync_error or "")
@@ -201,12 +208,27 @@ def _propagation(
     db.session.commit()
     _until(lambda: _synced(config, on_a, wanted_a, "Walking for A, edited"), "the edit")
 
+    # A world updated on the master (a gate moved) reaches every instance, whose runs hand
+    # that document to their simulator.
+    world = shipped_document("vrc_task_1")
+    world["configs"]["2"]["objects"]["gate_1"]["pose"] = [22.5, 3.0, 0.0]
+    version = update_world(SYSTEM, world).world.version
+    db.session.commit()
+    for on in (on_a, on_b):
+        _until(lambda on=on: _world(config, on)["version"] == version, f"the world on {on.name}")
+    moved = _world(config, on_b)["document"]["configs"]["2"]["objects"]["gate_1"]
+    assert moved["pose"] == [22.5, 3.0, 0.0]
+
     # Drift: someone promotes the member on the instance by hand; the reconcile puts it back.
     theirs = next(u for u in _on(on_a, config, "/users") if u["email"] == member_a.email)
     _on(on_a, config, f"/users/{theirs['id']}", method="PATCH", body={"role": "officer"})
+    shipped = {"document": shipped_document("vrc_task_1")}  # and puts a world back
+    _on(on_a, config, "/worlds/vrc_task_1", method="PUT", body=shipped)
     check_instances(config, [on_a.id])
     db.session.commit()
     assert any(member_a.email in c for c in on_a.sync_report["changed"]), on_a.sync_report
+    assert f"world vrc_task_1: version {version}" in on_a.sync_report["changed"]
+    assert _world(config, on_a)["digest"] == document_digest(world)
     assert _on(on_a, config, f"/users/{theirs['id']}")["role"] == "user"
     assert on_a.last_sync_at is not None and on_a.sync_error is None
 

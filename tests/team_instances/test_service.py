@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from drcsim.worlds import shipped_document
 from flask import Flask
 from sqlalchemy import select
 
@@ -38,6 +39,7 @@ from cloudsim.team_instances import service
 from cloudsim.team_instances.client import Endpoint, InstanceError
 from cloudsim.team_instances.poll import check_instances
 from cloudsim.team_instances.sync import SYNC_JOB, InstanceJob, sync_lock
+from cloudsim.worlds.service import update_world
 from tests.competition.support import open_task
 from tests.conftest import csrf_token, log_in, make_user
 from tests.support.servers import RedisServer, wait_for
@@ -156,6 +158,11 @@ def test_a_change_starts_a_sync_job_per_instance_concerned(app: Flask, team_a: T
     admin.name = "Renamed admin"
     db.session.commit()
     assert new_syncs() == {ours.id: 0, spare.id: 0}
+    world = shipped_document("vrc_task_2")
+    world["configs"]["2"]["terrain"]["mud"]["friction"] = 0.45
+    update_world(admin, world)  # every instance holds every world
+    db.session.commit()
+    assert new_syncs() == {ours.id: 1, spare.id: 1}
 
 
 def test_the_ssh_bundle_gives_the_https_address_and_the_ca(app: Flask) -> None:

@@ -8,6 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from drcsim.worlds import shipped_document
 from flask import Flask
 from sqlalchemy import select
 
@@ -27,6 +28,7 @@ from cloudsim.models import (
 from cloudsim.people.service import create_team, update_user
 from cloudsim.team_instances import service
 from cloudsim.team_instances.sync import desired_state
+from cloudsim.worlds.service import update_world
 from tests.competition.support import open_task
 from tests.conftest import csrf_token, make_user, running_app, token_for
 
@@ -43,6 +45,7 @@ def _master_state(config: Config) -> tuple[dict[str, Any], dict[str, str]]:
         add_key(member, KEY, "laptop")
         open_task(team.id, name="Walking 1")
         open_task(other.id, name="Not theirs")
+        update_world(SYSTEM, _moved_gate())  # version 2 on the master
         constellation = Constellation(
             name="ti-a", kind="cloudsim", provider="local", state=ConstellationState.READY
         )
@@ -93,6 +96,49 @@ def test_desired_state_applies_once_and_puts_drift_back(
         db.session.expire_all()
         assert not member.active
         assert db.session.scalar(select(Task).where(Task.name == "Walking 1")) is None
+
+
+def _moved_gate() -> dict[str, Any]:
+    document = shipped_document("vrc_task_1")
+    document["configs"]["2"]["objects"]["gate_1"]["pose"] = [22.5, 3.0, 0.0]
+    return document
+
+
+def test_worlds_reach_the_instance_once_and_drift_is_put_back(
+    make_config: Callable[..., Config], tmp_path: Path
+) -> None:
+    state, _ = _master_state(make_config(instance_dir=tmp_path / "master"))
+    sent = {w["name"]: w for w in state["worlds"]}
+    assert sent["vrc_task_1"]["version"] == 2 and sent["vrc_task_2"]["version"] == 1
+    with running_app(make_config(instance_dir=tmp_path / "instance")) as instance:
+        admin = make_user(Role.ADMIN)
+        master, client = token_for(admin), instance.test_client()
+        first = client.put(DESIRED, json=state, headers=master).get_json()
+        assert [c for c in first["changed"] if c.startswith("world")] == [
+            "world vrc_task_1: version 2"  # the others were already the master's
+        ]
+        assert client.put(DESIRED, json=state, headers=master).get_json()["changed"] == []
+        here = client.get("/api/v1/worlds/vrc_task_1", headers=master).get_json()
+        assert here["version"] == 2 and here["digest"] == sent["vrc_task_1"]["digest"]
+        assert here["document"]["configs"]["2"]["objects"]["gate_1"]["pose"] == [22.5, 3.0, 0.0]
+
+        # changed by hand here: put back to the master's document and version
+        update_world(admin, shipped_document("vrc_task_1"))
+        db.session.commit()
+        answer = client.put(DESIRED, json=state, headers=master).get_json()
+        assert "world vrc_task_1: version 2" in answer["changed"]
+        assert client.get("/api/v1/worlds/vrc_task_1", headers=master).get_json()["version"] == 2
+
+        # a document that is not what its digest says, or that drcsim refuses: nothing changes
+        tampered = json.loads(json.dumps(state))
+        tampered["worlds"][0]["document"]["time_limit_s"] = 60
+        tampered["tasks"] = []
+        refused = client.put(DESIRED, json=tampered, headers=master)
+        assert refused.status_code == 400 and "digest" in refused.get_json()["message"]
+        tampered["worlds"][0]["document"]["objects"] = []
+        refused = client.put(DESIRED, json=tampered, headers=master)
+        assert refused.status_code == 400 and "invalid world" in refused.get_json()["message"]
+        assert db.session.scalar(select(Task).where(Task.name == "Walking 1")) is not None
 
 
 def test_only_admins_push_and_bad_input_changes_nothing(app: Flask) -> None:

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from drcsim.worlds import shipped_document
 from flask import Flask
 
 from cloudsim.auth.policy import SYSTEM
@@ -162,6 +163,13 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_team_instances.InstanceHealth", "GET"): (401, 403, 403, 403, 200),
     # this app has team instances by now (the entries above): a master takes no desired state
     ("api_team_instances.DesiredState", "PUT"): (401, 403, 403, 403, 409),
+    ("worlds.index", "GET"): (LOGIN, 403, 403, 403, 200),
+    ("worlds.upload", "POST"): (LOGIN, 403, 403, 403, 400),  # nothing uploaded
+    ("worlds.show", "GET"): (LOGIN, 403, 403, 403, 200),
+    ("worlds.download", "GET"): (LOGIN, 403, 403, 403, 200),
+    ("api_worlds.Worlds", "GET"): (401, 403, 403, 403, 200),
+    ("api_worlds.WorldByName", "GET"): (401, 403, 403, 403, 200),
+    ("api_worlds.WorldByName", "PUT"): (401, 403, 403, 403, 200),
 }
 
 IGNORED_ENDPOINTS = {"static"}
@@ -201,6 +209,7 @@ def _bodies(team_id: int) -> dict[tuple[str, str], Callable[[], dict[str, Any]]]
             "users": [],
             "tasks": [],
         },
+        ("api_worlds.WorldByName", "PUT"): lambda: {"document": shipped_document("vrc_task_1")},
         ("api_competition.Season", "POST"): lambda: {
             "yaml": "tasks: [{name: Matrix season, world: vrc_task_2, "
             f"start: '2030-01-0{next(_seq) % 9 + 1} 09:00', stop: '2030-01-10 09:00'}}]"
@@ -250,6 +259,8 @@ def _url(
     if "instance_id" in rule.arguments:
         deployed = team_instances.deploy(SYSTEM, name=f"mx-{next(_seq)}", provider="local")
         values["instance_id"] = deployed[0][0].id
+    if "name" in rule.arguments:
+        values["name"] = "vrc_task_1"
     if "ref" in rule.arguments:
         values["ref"] = constellation_id
     if {"task_id", "run_id"} & set(rule.arguments):

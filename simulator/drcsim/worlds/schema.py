@@ -26,7 +26,10 @@ QUANTITY_CONDITIONS = ("at_least", "at_most", "increase")
 TOP_REQUIRED = ("name", "title", "time_limit_s", "ground", "robot", "objects", "terrain")
 TOP_KEYS = (*TOP_REQUIRED, "checkpoints", "configs", "assists")
 CONFIG_KEYS = ("seed", "robot", "ground", "objects", "terrain")
-NAME = re.compile(r"^[a-z][a-z0-9_]{0,63}$")
+NAME = re.compile(r"[a-z][a-z0-9_]{0,63}")
+MAX_DEPTH = 8
+MAX_ITEMS = 100  # objects, terrain patches, checkpoints
+MAX_SEED = 2**31 - 1
 
 
 def _fail(where: str, message: str) -> WorldError:
@@ -34,11 +37,15 @@ def _fail(where: str, message: str) -> WorldError:
 
 
 def _number(value: Any, where: str, minimum: float | None = None) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise _fail(where, f"must be a number, not {value!r}")
-    if minimum is not None and value < minimum:
-        raise _fail(where, f"must be at least {minimum}, not {value}")
-    return float(value)
+    try:
+        number = float(value) if not isinstance(value, bool | str) else math.nan
+    except (TypeError, ValueError, OverflowError):
+        number = math.nan
+    if not math.isfinite(number):
+        raise _fail(where, f"must be a number, not {str(value)[:40]!r}")
+    if minimum is not None and number < minimum:
+        raise _fail(where, f"must be at least {minimum}, not {number}")
+    return number
 
 
 def _mapping(value: Any, where: str) -> dict[str, Any]:
@@ -67,8 +74,8 @@ def _only(data: dict[str, Any], allowed: tuple[str, ...], where: str) -> None:
 
 
 def _ids(items: Any, where: str) -> list[dict[str, Any]]:
-    if not isinstance(items, list):
-        raise _fail(where, "must be a list")
+    if not isinstance(items, list) or len(items) > MAX_ITEMS:
+        raise _fail(where, f"must be a list of at most {MAX_ITEMS}")
     seen: set[str] = set()
     for index, item in enumerate(items):
         _mapping(item, f"{where}[{index}]")
@@ -104,8 +111,10 @@ def check_terrain(patch: dict[str, Any], where: str) -> None:
         raise _fail(f"{where}.blocks", "must be a whole number up to 500")
 
 
-def check_condition(condition: Any, gates: set[str], where: str) -> None:
+def check_condition(condition: Any, gates: set[str], where: str, depth: int = 0) -> None:
     """Raise WorldError unless `condition` is one the scorer evaluates (see scoring.py)."""
+    if depth > MAX_DEPTH:
+        raise _fail(where, f"conditions nest at most {MAX_DEPTH} deep")
     if not isinstance(condition, dict) or len(condition) != 1:
         raise _fail(where, "a condition is an object with exactly one key")
     ((kind, arg),) = condition.items()
@@ -114,7 +123,7 @@ def check_condition(condition: Any, gates: set[str], where: str) -> None:
         if not isinstance(arg, list) or not arg:
             raise _fail(inner, "must be a non-empty list of conditions")
         for index, part in enumerate(arg):
-            check_condition(part, gates, f"{inner}[{index}]")
+            check_condition(part, gates, f"{inner}[{index}]", depth + 1)
     elif kind in ("flag", "not_flag"):
         _text(arg, inner, 64)
     elif kind in QUANTITY_CONDITIONS:
@@ -135,7 +144,7 @@ def check_top(data: Any) -> dict[str, Any]:
     """Raise WorldError unless the document's shared part (before configurations) is sound."""
     doc = _mapping(data, "world")
     name = doc.get("name")
-    if not isinstance(name, str) or not NAME.match(name):
+    if not isinstance(name, str) or not NAME.fullmatch(name):
         raise _fail("name", "must be lower-case letters, digits and _ (at most 64)")
     missing = [key for key in (*TOP_REQUIRED, "checkpoints", "configs") if key not in doc]
     if missing:
@@ -153,8 +162,8 @@ def check_top(data: Any) -> dict[str, Any]:
         check_terrain(patch, f"{name}.terrain[{index}]")
     gates = {item["id"] for item in doc["objects"] if item["model"] == "gate"}
     checkpoints = doc["checkpoints"]
-    if not isinstance(checkpoints, list) or not checkpoints:
-        raise _fail(f"{name}.checkpoints", "must be a non-empty list")
+    if not isinstance(checkpoints, list) or not 0 < len(checkpoints) <= MAX_ITEMS:
+        raise _fail(f"{name}.checkpoints", f"must be a list of 1 to {MAX_ITEMS}")
     for index, checkpoint in enumerate(checkpoints):
         where = f"{name}.checkpoints[{index}]"
         _only(_mapping(checkpoint, where), ("name", "when"), where)
@@ -168,12 +177,13 @@ def check_top(data: Any) -> dict[str, Any]:
 def check_config_overrides(name: str, key: str, overrides: Any) -> dict[str, Any]:
     """Raise WorldError unless a run configuration's overrides have the allowed shape."""
     where = f"{name}.configs.{key}"
-    if not key.isdigit() or not 1 <= int(key) <= 100:
+    if not (key.isascii() and key.isdigit()) or not 1 <= int(key) <= 100:
         raise _fail(where, "run configurations are numbered 1..100")
     data = _mapping(overrides, where)
     _only(data, CONFIG_KEYS, where)
-    if isinstance(data.get("seed"), bool) or not isinstance(data.get("seed"), int):
-        raise _fail(f"{where}.seed", "must be a whole number")
+    seed = data.get("seed")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise _fail(f"{where}.seed", f"must be a whole number 0..{MAX_SEED}")
     robot = _mapping(data.get("robot", {}), f"{where}.robot")
     _only(robot, ("start",), f"{where}.robot")
     if "start" in robot:
