@@ -5,17 +5,17 @@ from __future__ import annotations
 
 import io
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 import yaml
-from click.testing import CliRunner, Result
+from click.testing import Result
 from drcsim.worlds import WORLD_NAMES, document_digest, shipped_document
 from flask import Flask
 from sqlalchemy import select
 
 from cloudsim.auth.policy import SYSTEM
-from cloudsim.cli import main
 from cloudsim.competition.artifacts import run_dir
 from cloudsim.competition.jobs import simulator_command
 from cloudsim.errors import Conflict, InvalidInput
@@ -23,8 +23,8 @@ from cloudsim.extensions import db
 from cloudsim.models import AuditEvent, Role, Run, RunState, Team, World
 from cloudsim.worlds.service import check_world, update_world
 from tests.competition.support import open_task
+from tests.competition.test_cli import run  # noqa: F401 (the fixture)
 from tests.conftest import csrf_token, log_in, make_user, token_for
-from tests.support.servers import RedisServer
 
 
 def _moved_gate() -> dict:
@@ -84,12 +84,12 @@ def test_tasks_and_runs_use_the_stored_world(app: Flask, team_a: Team) -> None:
     with pytest.raises(InvalidInput, match="no run configuration 7"):
         check_world("vrc_task_1", 7)
     task = open_task(team_a.id, world="vrc_task_1", run_config=6)
-    run = Run(task_id=task.id, team_id=team_a.id, state=RunState.STARTING)
-    db.session.add(run)
+    started = Run(task_id=task.id, team_id=team_a.id, state=RunState.STARTING)
+    db.session.add(started)
     db.session.flush()
-    command = simulator_command(run, "10.0.0.2", ["10.0.0.0/24"])
-    assert f"> {run_dir(run.id)}/world.json && systemd-run" in command
-    assert f"--world-file {run_dir(run.id)}/world.json" in command
+    command = simulator_command(started, "10.0.0.2", ["10.0.0.0/24"])
+    assert f"> {run_dir(started.id)}/world.json && systemd-run" in command
+    assert f"--world-file {run_dir(started.id)}/world.json" in command
     assert "22.5,3.0,0.0" in command and "--config 6" in command
 
 
@@ -147,18 +147,10 @@ def test_the_page_form_uploads_a_yaml_file_and_shows_errors(app: Flask) -> None:
 
 
 def test_the_command_line_lists_shows_and_updates(
-    tmp_path: Path, redis_server: RedisServer, encryption_key: str
+    run: Callable[..., Result],  # noqa: F811 (`cloudsim` on a database `db upgrade` made)
+    tmp_path: Path,
 ) -> None:
-    env = {
-        "CLOUDSIM_INSTANCE_DIR": str(tmp_path / "instance"),
-        "CLOUDSIM_REDIS_URL": redis_server.url(0),
-        "CLOUDSIM_ENCRYPTION_KEYS": encryption_key,
-    }
-
-    def invoke(*args: str) -> Result:
-        return CliRunner().invoke(main, list(args), env=env)
-
-    assert invoke("db", "upgrade").exit_code == 0  # the migration seeds the shipped worlds
+    invoke = run
     listed = invoke("world", "list", "--json")
     assert [w["version"] for w in json.loads(listed.output)] == [1, 1, 1]
     shown = json.loads(invoke("world", "show", "vrc_task_1").output)
