@@ -1,7 +1,7 @@
 """world definitions as data (run configurations and scoring rules), seeded from drcsim's shipped worlds
 
-Revision ID: 0008
-Revises: 0007
+Revision ID: 0009
+Revises: 0008
 Create Date: 2026-11-23 02:00:00
 """
 
@@ -13,8 +13,8 @@ import sqlalchemy as sa
 from alembic import op
 from drcsim.worlds import WORLD_NAMES, document_digest, shipped_document
 
-revision = "0008"
-down_revision = "0007"
+revision = "0009"
+down_revision = "0008"
 branch_labels = None
 depends_on = None
 
