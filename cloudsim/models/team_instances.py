@@ -55,6 +55,8 @@ class TeamInstance(Base):
     sync_error: Mapped[str | None] = mapped_column(Text)  # why it is behind, if it is
     # what the last sync changed (drift put back, or the master's news) and what it reported
     sync_report: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    # the constellation launched through it, as the master last saw it (see team_instances.launch)
+    launch: Mapped[dict[str, Any] | None] = mapped_column(JSON)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
 
     team: Mapped[Team | None] = relationship()

@@ -7,8 +7,11 @@ from flask import Flask
 
 
 def init_app(app: Flask) -> None:
-    """Register this feature's pages, API and jobs with the app."""
-    del app  # nothing but commands
+    """Register this feature's API with the app."""
+    from cloudsim.api import register_api
+    from cloudsim.providers import api
+
+    register_api(app, api.blp)
 
 
 def init_cli(cli: click.Group) -> None:

@@ -9,7 +9,7 @@ from flask.views import MethodView
 from cloudsim.api.common import Blueprint, SelectPage, caller, caller_with
 from cloudsim.jobs.schemas import JobSchema
 from cloudsim.models import Role
-from cloudsim.team_instances import health, service
+from cloudsim.team_instances import health, launch, service
 from cloudsim.team_instances.apply import apply_desired_state
 from cloudsim.team_instances.schemas import (
     AssignSchema,
@@ -17,6 +17,9 @@ from cloudsim.team_instances.schemas import (
     DeploySchema,
     DesiredStateSchema,
     HealthSchema,
+    InstanceProviderSchema,
+    LaunchThroughSchema,
+    OutcomeSchema,
     SyncResultSchema,
     TeamInstanceSchema,
 )
@@ -57,6 +60,27 @@ class TeamInstanceById(MethodView):
     def delete(self, instance_id: int) -> Any:
         """Terminate the instance's machines (admins); follow the returned job."""
         return service.terminate(caller(), instance_id)
+
+
+@blp.route("/team-instances/<int:instance_id>/provider")
+class InstanceProvider(MethodView):
+    @blp.arguments(InstanceProviderSchema)
+    @blp.response(200, TeamInstanceSchema)
+    def put(self, data: dict[str, Any], instance_id: int) -> Any:
+        """Keep (encrypted) the provider settings handed to the instance at launch (admins)."""
+        return launch.set_provider_settings(
+            caller(), instance_id, data["provider"], data["settings"]
+        )
+
+
+@blp.route("/team-instances/launch")
+class LaunchThrough(MethodView):
+    @blp.arguments(LaunchThroughSchema)
+    @blp.response(200, OutcomeSchema(many=True))
+    def post(self, data: dict[str, Any]) -> Any:
+        """Launch each team's constellation through its instance (admins): who is ready,
+        launching, or failed and why."""
+        return launch.launch(caller(), data["kind"], data["provider"], data["instance_ids"])
 
 
 @blp.route("/instance/health")

@@ -2,16 +2,22 @@
 
 from __future__ import annotations
 
+import dataclasses
+import time
+from typing import TextIO
+
 import click
+import yaml
 from flask import current_app
 
 from cloudsim.auth.policy import SYSTEM
-from cloudsim.cli import app_context, emit, reports_errors
+from cloudsim.cli import app_context, commit, emit, reports_errors
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.cli import follow_job
 from cloudsim.models import TeamInstance
 from cloudsim.people.service import find_team
 from cloudsim.providers.service import PROVIDERS
+from cloudsim.team_instances import launch as launches
 from cloudsim.team_instances import service
 from cloudsim.team_instances.poll import check_instances
 
@@ -29,6 +35,7 @@ def instance_data(instance: TeamInstance) -> dict[str, object]:
         "checked_at": instance.checked_at,
         "last_sync_at": instance.last_sync_at,
         "sync_error": instance.sync_error,
+        "launch": instance.launch,
     }
 
 
@@ -123,3 +130,73 @@ def terminate(name: str, as_json: bool) -> None:
         job = service.terminate(SYSTEM, name)
         found = service.get_instance(SYSTEM, name)
         emit(instance_data(found) | {"job": job.id}, as_json, f"{_line(found)} (job {job.id})")
+
+
+@instance.command("provider")
+@click.argument("name")
+@click.argument("provider", type=click.Choice([p for p in PROVIDERS if p != "local"]))
+@click.option(
+    "--inventory",
+    "inventory_file",
+    required=True,
+    type=click.File("r"),
+    help="servers: the YAML inventory of the machines this instance launches on.",
+)
+@reports_errors
+def provider(name: str, provider: str, inventory_file: TextIO) -> None:
+    """Keep (encrypted) the provider settings handed to instance NAME when it launches."""
+    try:
+        inventory = yaml.safe_load(inventory_file)
+    except yaml.YAMLError as exc:
+        raise click.ClickException(f"{inventory_file.name}: not YAML: {exc}") from None
+    with app_context():
+        found = launches.set_provider_settings(SYSTEM, name, provider, {"inventory": inventory})
+        click.echo(f"{found.name}: {provider} settings kept (encrypted), handed over at launch")
+
+
+def _summary_line(outcome: launches.Outcome) -> str:
+    why = f" ({outcome.why})" if outcome.why else ""
+    return f"{outcome.instance}  {outcome.team or 'spare'}  {outcome.state}{why}"
+
+
+@instance.command("launch")
+@click.argument("names", nargs=-1)
+@click.option("--all", "every", is_flag=True, help="Every team's instance.")
+@click.option("--kind", default="vrc", show_default=True, help="Constellation kind.")
+@click.option("--provider", default="servers", show_default=True, type=click.Choice(PROVIDERS))
+@click.option("--wait", is_flag=True, help="Follow the launches until each is ready or failed.")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@reports_errors
+def launch(
+    names: tuple[str, ...], every: bool, kind: str, provider: str, wait: bool, as_json: bool
+) -> None:
+    """Launch each team's constellation through its instance; say who is ready, launching
+    or failed (and why)."""
+    if every == bool(names):
+        raise click.UsageError("name instances or give --all")
+    with app_context():
+        refs: list[int | str] | None = None if every else list(names)
+        summary = launches.launch(SYSTEM, kind, provider, refs)
+        if wait:
+            for outcome in summary:
+                if outcome.job_id:
+                    follow_job(outcome.job_id, True)
+            summary = _wait([o.instance_id for o in summary])
+        emit(
+            [dataclasses.asdict(o) for o in summary],
+            as_json,
+            "\n".join(_summary_line(o) for o in summary) or "no team instances",
+        )
+
+
+def _wait(ids: list[int], interval: float = 5, timeout: float = 3600) -> list[launches.Outcome]:
+    """Poll the instances until no launch is still going; return the summary."""
+    deadline = time.monotonic() + timeout
+    while True:
+        db.session.expire_all()
+        instances = check_instances(current_app.config["CLOUDSIM"], ids)
+        commit()
+        summary = [launches.outcome(i) for i in instances]
+        if time.monotonic() > deadline or all(o.state != "launching" for o in summary):
+            return summary
+        time.sleep(interval)

@@ -8,6 +8,7 @@ from wtforms.validators import DataRequired, Length, NumberRange
 
 from cloudsim.models import Team
 from cloudsim.providers.service import PROVIDERS
+from constellations.definition import available_kinds
 
 
 def _team_choices(teams: list[Team], empty: str) -> list[SelectChoice]:
@@ -41,4 +42,17 @@ class AssignForm(FlaskForm):
     def offer(self, teams: list[Team]) -> AssignForm:
         """Fill the choices."""
         self.team.choices = _team_choices(teams, "— choose —")
+        return self
+
+
+class LaunchThroughForm(FlaskForm):
+    """The kind and provider of every team's constellation, launched through its instance."""
+
+    kind = SelectField("Kind", default="vrc")
+    provider = SelectField("Provider", default="servers")
+
+    def offer(self) -> LaunchThroughForm:
+        """Fill the choices."""
+        self.kind.choices = [SelectChoice(k) for k in available_kinds() if k != "cloudsim"]
+        self.provider.choices = [SelectChoice(p) for p in PROVIDERS]
         return self

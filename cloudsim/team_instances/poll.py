@@ -25,6 +25,7 @@ from cloudsim.models import ConstellationState, InstanceState, TeamInstance
 from cloudsim.providers.service import open_provider
 from cloudsim.team_instances import lifecycle
 from cloudsim.team_instances.client import Endpoint, InstanceError, call
+from cloudsim.team_instances.launch import follow, followed, launch_of
 from cloudsim.team_instances.sync import (
     desired_state,
     release,
@@ -65,25 +66,30 @@ def endpoint_of(instance: TeamInstance, config: Config) -> Endpoint:
 
 @dataclass(frozen=True)
 class Visit:
-    """What one instance answered: its health (or why not), and the sync (or why not)."""
+    """What one instance answered: its health (or why not), the sync (or why not), and what
+    it said of the constellation launched through it."""
 
     health: dict[str, Any] | str
     sync: dict[str, Any] | str | None = None
+    launch: dict[str, Any] | str | None = None
 
 
-def _visit(endpoint: Endpoint, desired: dict[str, Any]) -> Visit:
-    """Check an instance's health, then push its desired state (the reconcile)."""
+def _visit(endpoint: Endpoint, desired: dict[str, Any], launch: dict[str, Any] | None) -> Visit:
+    """Check an instance's health, push its desired state (the reconcile), then follow the
+    constellation launched through it."""
     try:
         health = call(endpoint, "GET", "/instance/health", timeout=CALL_TIMEOUT)
     except InstanceError as exc:
         return Visit(str(exc))
     if not isinstance(health, dict):
         return Visit("the health check answered no object")
+    seen = follow(endpoint, launch, CALL_TIMEOUT) if launch else None
     try:
         answer = call(endpoint, "PUT", "/instance/desired-state", desired, timeout=CALL_TIMEOUT)
     except InstanceError as exc:
-        return Visit(health, str(exc))
-    return Visit(health, answer if isinstance(answer, dict) else "the sync answered no object")
+        return Visit(health, str(exc), seen)
+    sync = answer if isinstance(answer, dict) else "the sync answered no object"
+    return Visit(health, sync, seen)
 
 
 def check_instances(
@@ -119,7 +125,9 @@ def check_instances(
                 except (InstanceError, CloudSimError) as exc:
                     lifecycle.unreachable(instance, str(exc))
         with ThreadPoolExecutor(max_workers=PARALLEL) as pool:
-            visits = pool.map(_visit, endpoints.values(), [desired[i] for i in endpoints])
+            by_id = {i.id: i for i in instances}
+            launches = [launch_of(by_id[i]) for i in endpoints]
+            visits = pool.map(_visit, endpoints.values(), [desired[i] for i in endpoints], launches)
             answers = dict(zip(endpoints, visits, strict=True))
     finally:
         for lock in locks:
@@ -133,6 +141,7 @@ def check_instances(
             sync_failed(instance, f"unreachable: {visit.health}")
             continue
         lifecycle.healthy(instance, endpoints[instance.id].url, visit.health)
+        followed(instance, visit.launch)
         if isinstance(visit.sync, dict):
             synced(instance, visit.sync)
         elif visit.sync is not None:

@@ -34,6 +34,14 @@ class TeamInstanceSchema(Schema):
     checked_at = fields.DateTime(allow_none=True)
     last_sync_at = fields.DateTime(allow_none=True)
     sync_error = fields.Str(allow_none=True)
+    launch = fields.Dict(
+        allow_none=True,
+        metadata={
+            "description": "the constellation launched through it, as last polled: kind, "
+            "provider, state, stage, progress, error, constellation_id and job_id (the "
+            "instance's), seen_at, poll_error"
+        },
+    )
     created_at = fields.DateTime()
 
 
@@ -135,3 +143,31 @@ class SyncResultSchema(Schema):
     reported = fields.List(
         fields.Str(), metadata={"description": "what it found and left for people to decide"}
     )
+
+
+class InstanceProviderSchema(Schema):
+    provider = fields.Str(required=True, validate=validate.Length(min=1, max=32))
+    settings = fields.Dict(
+        required=True,
+        metadata={"description": 'e.g. servers: {"inventory": [...]}; kept encrypted'},
+    )
+
+
+class LaunchThroughSchema(Schema):
+    kind = fields.Str(load_default="vrc", validate=validate.Length(min=1, max=32))
+    provider = fields.Str(load_default="servers", validate=validate.Length(min=1, max=32))
+    instance_ids = fields.List(
+        Id(),
+        load_default=None,
+        validate=validate.Length(min=1, max=100),
+        metadata={"description": "which instances; none: every team's"},
+    )
+
+
+class OutcomeSchema(Schema):
+    instance_id = fields.Int()
+    instance = fields.Str()
+    team = fields.Str(allow_none=True)
+    state = fields.Str(metadata={"description": "ready, launching or failed"})
+    why = fields.Str(allow_none=True)
+    job_id = fields.Str(allow_none=True, metadata={"description": "the master's launch job"})

@@ -12,15 +12,22 @@ from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.models import Role
 from cloudsim.people.service import visible_teams
-from cloudsim.team_instances import service
-from cloudsim.team_instances.forms import AssignForm, DeployForm
+from cloudsim.team_instances import launch, service
+from cloudsim.team_instances.forms import AssignForm, DeployForm, LaunchThroughForm
 
 bp = Blueprint("team_instances", __name__)
 
 
-def _index(form: DeployForm, status: int = 200) -> ResponseReturnValue:
+def _index(
+    form: DeployForm, status: int = 200, launching: LaunchThroughForm | None = None
+) -> ResponseReturnValue:
     instances = db.session.scalars(service.visible_instances(current_user)).all()
-    return render_template("team_instances/index.html", instances=instances, form=form), status
+    return render_template(
+        "team_instances/index.html",
+        instances=instances,
+        form=form,
+        launching=launching or LaunchThroughForm().offer(),
+    ), status
 
 
 @bp.route("/team-instances")
@@ -50,6 +57,28 @@ def deploy() -> ResponseReturnValue:
     flash(f"Deploying {', '.join(i.name for i, _ in deployed)}.", "info")
     if len(deployed) == 1:
         return redirect(url_for("team_instances.show", instance_id=deployed[0][0].id))
+    return redirect(url_for("team_instances.index"))
+
+
+@bp.route("/team-instances/launch", methods=["POST"])
+@role_required(Role.ADMIN)
+def launch_all() -> ResponseReturnValue:
+    form = LaunchThroughForm().offer()
+    deploy_form = DeployForm().offer(visible_teams(current_user))
+    if not form.validate_on_submit():
+        return _index(deploy_form, 400, form)
+    try:
+        summary = launch.launch(current_user, form.kind.data, form.provider.data)
+    except CloudSimError as exc:
+        db.session.rollback()
+        form.form_errors.append(str(exc))
+        return _index(deploy_form, exc.status, form)
+    if not summary:
+        flash("No team has an instance yet.", "info")
+    for outcome in summary:
+        why = f": {outcome.why}" if outcome.why else ""
+        category = "error" if outcome.state == "failed" else "info"
+        flash(f"{outcome.instance} ({outcome.team}): {outcome.state}{why}", category)
     return redirect(url_for("team_instances.index"))
 
 

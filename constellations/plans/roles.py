@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from constellations.plans.base import Action, PlanContext, PlanItem
 from constellations.plans.software import (
+    REMOTE_ROOT,
     install_source_bundle,
     install_wheelhouse,
     wait_for_port,
@@ -79,6 +80,8 @@ def cloudsim_server(ctx: PlanContext) -> list[PlanItem]:
             "admin_token": ctx.secrets["cloudsim_admin_token"],
             "tls_cert": CLOUDSIM_TLS_CERT,
             "tls_key": CLOUDSIM_TLS_KEY,
+            # the wheels it was installed with: its own launches build theirs from them
+            "wheels": f"{REMOTE_ROOT}/{ctx.app_bundle.name}",
         },
     )
     unit = ctx.templates.render(

@@ -23,6 +23,7 @@ from cloudsim.models import Constellation, ConstellationState, Role, Team, User
 from cloudsim.team_instances import service as team_instances
 from tests.competition.support import finished_run, open_task, ready_constellation
 from tests.conftest import log_in, make_user, token_for
+from tests.team_instances.test_launch import inventory
 
 PERSONAS = ("anon", "user_a", "user_b", "officer", "admin")
 _seq = itertools.count(1)
@@ -170,9 +171,14 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_worlds.Worlds", "GET"): (401, 403, 403, 403, 200),
     ("api_worlds.WorldByName", "GET"): (401, 403, 403, 403, 200),
     ("api_worlds.WorldByName", "PUT"): (401, 403, 403, 403, 200),
+    ("api_team_instances.InstanceProvider", "PUT"): (401, 403, 403, 403, 200),
+    ("api_team_instances.LaunchThrough", "POST"): (401, 403, 403, 403, 200),
+    ("team_instances.launch_all", "POST"): (LOGIN, 403, 403, 403, 302),  # the defaults: vrc
+    ("api_providers.ProviderSettings", "PUT"): (401, 403, 403, 403, 200),
 }
 
 IGNORED_ENDPOINTS = {"static"}
+INVENTORY = inventory()
 LOGOUT = ("auth.logout", "POST")
 
 
@@ -210,6 +216,12 @@ def _bodies(team_id: int) -> dict[tuple[str, str], Callable[[], dict[str, Any]]]
             "tasks": [],
         },
         ("api_worlds.WorldByName", "PUT"): lambda: {"document": shipped_document("vrc_task_1")},
+        ("api_team_instances.InstanceProvider", "PUT"): lambda: {
+            "provider": "servers",
+            "settings": {"inventory": INVENTORY},
+        },
+        ("api_team_instances.LaunchThrough", "POST"): lambda: {"kind": "simple"},
+        ("api_providers.ProviderSettings", "PUT"): lambda: {"settings": {"inventory": INVENTORY}},
         ("api_competition.Season", "POST"): lambda: {
             "yaml": "tasks: [{name: Matrix season, world: vrc_task_2, "
             f"start: '2030-01-0{next(_seq) % 9 + 1} 09:00', stop: '2030-01-10 09:00'}}]"
@@ -260,7 +272,8 @@ def _url(
         deployed = team_instances.deploy(SYSTEM, name=f"mx-{next(_seq)}", provider="local")
         values["instance_id"] = deployed[0][0].id
     if "name" in rule.arguments:
-        values["name"] = "vrc_task_1"
+        # a provider's name, or a world's
+        values["name"] = "servers" if endpoint.startswith("api_providers") else "vrc_task_1"
     if "ref" in rule.arguments:
         values["ref"] = constellation_id
     if {"task_id", "run_id"} & set(rule.arguments):
