@@ -16,7 +16,7 @@ from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 from drcsim.worlds import document_digest, shipped_document
 from flask import Flask
-from playwright.sync_api import expect, sync_playwright
+from playwright.sync_api import Browser, Page, Playwright, expect, sync_playwright
 from sqlalchemy import select
 
 from cloudsim.auth.policy import SYSTEM
@@ -28,7 +28,16 @@ from cloudsim.launched_constellations.keys import (
     instance_admin_token,
     instance_tls,
 )
-from cloudsim.models import Constellation, InstanceState, Job, JobState, Role, Team, TeamInstance
+from cloudsim.models import (
+    Constellation,
+    InstanceState,
+    Job,
+    JobState,
+    Role,
+    Team,
+    TeamInstance,
+    User,
+)
 from cloudsim.people.service import create_team, update_user
 from cloudsim.providers.service import open_provider
 from cloudsim.team_instances.client import call
@@ -44,7 +53,7 @@ from tests.web.test_browser import CHROMIUM, CHROMIUM_ARGS
 pytestmark = pytest.mark.hosts
 
 
-def _ready(config: Config) -> list[TeamInstance] | None:
+def ready(config: Config) -> list[TeamInstance] | None:
     """Check the instances once; return them when every one is ready with a live worker."""
     db.session.expire_all()
     instances = check_instances(config)
@@ -101,7 +110,7 @@ def test_master_deploys_team_instances_and_pins_their_certificates(
             assert secret not in done.log
 
     instances = cast(
-        list[TeamInstance], wait_for(lambda: _ready(constellations_config), 120, "instances ready")
+        list[TeamInstance], wait_for(lambda: ready(constellations_config), 120, "instances ready")
     )
     for instance in instances:
         address = instance.constellation.machines[0].public_ip
@@ -153,7 +162,7 @@ def _raw_exchange(connect: list[str], request: bytes) -> bytes:
     return out
 
 
-def _on(instance: TeamInstance, config: Config, path: str, **kwargs: Any) -> Any:
+def on_instance(instance: TeamInstance, config: Config, path: str, **kwargs: Any) -> Any:
     """Call an instance's API as the master does (pinned HTTPS, the master's admin token)."""
     return call(endpoint_of(instance, config), kwargs.pop("method", "GET"), path, **kwargs)
 
@@ -171,7 +180,7 @@ def _until(condition: Callable[[], bool], what: str) -> None:
 
 
 def _world(config: Config, instance: TeamInstance) -> dict[str, Any]:
-    found: dict[str, Any] = _on(instance, config, "/worlds/vrc_task_1")
+    found: dict[str, Any] = on_instance(instance, config, "/worlds/vrc_task_1")
     return found
 
 
@@ -181,8 +190,8 @@ def _behind(instance: TeamInstance) -> bool:
 
 
 def _synced(config: Config, instance: TeamInstance, emails: set[str], task: str) -> bool:
-    users = {u["email"] for u in _on(instance, config, "/users?page_size=500")}
-    tasks = {t["name"] for t in _on(instance, config, "/tasks?page_size=500")}
+    users = {u["email"] for u in on_instance(instance, config, "/users?page_size=500")}
+    tasks = {t["name"] for t in on_instance(instance, config, "/tasks?page_size=500")}
     return emails <= users and task in tasks
 
 
@@ -201,7 +210,7 @@ def _propagation(
     wanted_a = {member_a.email, officer.email}
     _until(lambda: _synced(config, on_a, wanted_a, "Walking for A"), "A in sync")
     _until(lambda: _synced(config, on_b, {member_b.email, officer.email}, "Driving for B"), "B")
-    assert member_b.email not in {u["email"] for u in _on(on_a, config, "/users")}
+    assert member_b.email not in {u["email"] for u in on_instance(on_a, config, "/users")}
 
     # A task edited on the master reaches the instance.
     task_a.name = "Walking for A, edited"
@@ -220,16 +229,16 @@ def _propagation(
     assert moved["pose"] == [22.5, 3.0, 0.0]
 
     # Drift: someone promotes the member on the instance by hand; the reconcile puts it back.
-    theirs = next(u for u in _on(on_a, config, "/users") if u["email"] == member_a.email)
-    _on(on_a, config, f"/users/{theirs['id']}", method="PATCH", body={"role": "officer"})
+    theirs = next(u for u in on_instance(on_a, config, "/users") if u["email"] == member_a.email)
+    on_instance(on_a, config, f"/users/{theirs['id']}", method="PATCH", body={"role": "officer"})
     shipped = {"document": shipped_document("vrc_task_1")}  # and puts a world back
-    _on(on_a, config, "/worlds/vrc_task_1", method="PUT", body=shipped)
+    on_instance(on_a, config, "/worlds/vrc_task_1", method="PUT", body=shipped)
     check_instances(config, [on_a.id])
     db.session.commit()
     assert any(member_a.email in c for c in on_a.sync_report["changed"]), on_a.sync_report
     assert f"world vrc_task_1: version {version}" in on_a.sync_report["changed"]
     assert _world(config, on_a)["digest"] == document_digest(world)
-    assert _on(on_a, config, f"/users/{theirs['id']}")["role"] == "user"
+    assert on_instance(on_a, config, f"/users/{theirs['id']}")["role"] == "user"
     assert on_a.last_sync_at is not None and on_a.sync_error is None
 
     # A cut between the master and A (here: A's certificate no longer matches the pin): the
@@ -251,24 +260,10 @@ def _propagation(
 
     # The member logs in to their instance in Chromium, with the master's password; sees
     # their team's task only; is locked out once disabled on the master.
-    driver = open_provider("local", config).driver
-    chromium = tmp / "chromium-on-the-internet"
-    chromium.write_text(
-        "#!/bin/sh\nexec " + shlex.join(driver.ex_public_command([CHROMIUM]) or []) + ' "$@"\n'
-    )
-    chromium.chmod(0o755)
-    spki = _spki_pin(instance_tls(on_a.constellation).cert)
     with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(
-            executable_path=str(chromium),
-            args=[*CHROMIUM_ARGS, f"--ignore-certificate-errors-spki-list={spki}"],
-        )
+        browser = instance_browser(playwright, config, on_a, tmp)
         page = browser.new_page()
-        base = (on_a.url or "").rstrip("/")
-        page.goto(f"{base}/login")
-        page.get_by_label("E-mail").fill(member_a.email)
-        page.get_by_label("Password").fill(PASSWORD)
-        page.get_by_role("button", name="Log in").click()
+        base = log_in_instance(page, on_a, member_a)
         page.goto(f"{base}/tasks")
         expect(page.get_by_text("Walking for A, edited")).to_be_visible()
         assert "Driving for B" not in page.content() and "Team B" not in page.content()
@@ -276,9 +271,9 @@ def _propagation(
         db.session.commit()  # pushed at once by the sync job
         wait_for(
             lambda: (
-                not next(u for u in _on(on_a, config, "/users") if u["email"] == member_a.email)[
-                    "active"
-                ]
+                not next(
+                    u for u in on_instance(on_a, config, "/users") if u["email"] == member_a.email
+                )["active"]
             ),
             60,
             "the member disabled on the instance",
@@ -286,6 +281,34 @@ def _propagation(
         page.goto(f"{base}/tasks")
         expect(page.get_by_label("Password")).to_be_visible()  # sent back to the login form
         browser.close()
+
+
+def instance_browser(
+    playwright: Playwright, config: Config, instance: TeamInstance, tmp: Path
+) -> Browser:
+    """Start Chromium on "the internet" side of the local provider, trusting the instance's
+    certificate (its public key pinned, as the master pins the certificate)."""
+    driver = open_provider("local", config).driver
+    chromium = tmp / "chromium-on-the-internet"
+    chromium.write_text(
+        "#!/bin/sh\nexec " + shlex.join(driver.ex_public_command([CHROMIUM]) or []) + ' "$@"\n'
+    )
+    chromium.chmod(0o755)
+    spki = _spki_pin(instance_tls(instance.constellation).cert)
+    return playwright.chromium.launch(
+        executable_path=str(chromium),
+        args=[*CHROMIUM_ARGS, f"--ignore-certificate-errors-spki-list={spki}"],
+    )
+
+
+def log_in_instance(page: Page, instance: TeamInstance, user: User) -> str:
+    """Log a user in to an instance's pages with the master's password; return its base URL."""
+    base = (instance.url or "").rstrip("/")
+    page.goto(f"{base}/login")
+    page.get_by_label("E-mail").fill(user.email)
+    page.get_by_label("Password").fill(PASSWORD)
+    page.get_by_role("button", name="Log in").click()
+    return base
 
 
 def _spki_pin(cert_pem: str) -> str:
