@@ -6,6 +6,7 @@ import io
 from datetime import UTC, datetime, timedelta
 
 import pytest
+import sqlalchemy as sa
 from flask import Flask
 
 from cloudsim.competition import schedule, season
@@ -240,3 +241,30 @@ def test_an_officer_imports_a_season_and_deletes_a_task_through_the_api(
     assert client.delete(f"/api/v1/tasks/{task_id}", headers=officer).status_code == 204
     assert client.get(f"/api/v1/tasks/{task_id}", headers=officer).status_code == 404
     assert len(client.get("/api/v1/tasks", headers=officer).json) == 4
+
+
+def test_the_exported_season_shows_every_change_at_once(
+    app: Flask, people: dict[str, User | None], team_a: Team, team_b: Team
+) -> None:
+    # The document is kept per process for the rows it was drawn from: nothing may go stale.
+    client = app.test_client()
+    officer = token_for(people["officer"])  # type: ignore[arg-type]
+    assert (
+        client.post("/api/v1/schedule", json={"yaml": SEASON}, headers=officer).status_code == 201
+    )
+
+    def exported() -> str:
+        return str(client.get("/api/v1/schedule", headers=officer).json["yaml"])
+
+    first = exported()
+    assert exported() == first and "Team A" not in first  # every team runs runs 1 and 3
+    driving_b = db.session.query(Task).filter_by(name="Driving, run 1", team_id=team_b.id).one()
+    assert client.delete(f"/api/v1/tasks/{driving_b.id}", headers=officer).status_code == 204
+    assert "teams:\n  - Team A" in exported()
+    renamed = client.patch(f"/api/v1/teams/{team_a.id}", json={"name": "Team Z"}, headers=officer)
+    assert renamed.status_code == 200, renamed.json
+    assert "Team Z" in exported() and "Team A" not in exported()
+    # Another process's change, written straight to the database, shows too.
+    db.session.execute(sa.update(Task).values(uplink_bits=4242))
+    db.session.commit()
+    assert "uplink_bits: 4242" in exported() and "uplink_bits: 115200" not in exported()
