@@ -72,7 +72,12 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_INSTANCE_POLL_SECONDS": Setting(
         "30", "How often a master checks its team instances' health (and reconciles them)"
     ),
-    "CLOUDSIM_WEB_WORKERS": Setting("2", "gunicorn worker processes"),
+    "CLOUDSIM_WEB_WORKERS": Setting(
+        "", "gunicorn worker processes; default one per CPU core, at least 2"
+    ),
+    "CLOUDSIM_WEB_THREADS": Setting(
+        "4", "Threads per gunicorn worker; clients' idle keep-alive connections hold none"
+    ),
     "CLOUDSIM_WORKER_CONCURRENCY": Setting("2", "Celery worker processes"),
     "CLOUDSIM_SECURE_COOKIES": Setting("false", "Mark cookies Secure (set true behind HTTPS)"),
     "CLOUDSIM_SESSION_HOURS": Setting("12", "Lifetime of a login session"),
@@ -180,6 +185,7 @@ class Config:
     tls_key: str
     instance_poll_seconds: int
     web_workers: int
+    web_threads: int
     worker_concurrency: int
     secure_cookies: bool
     session_hours: int
@@ -295,7 +301,10 @@ class Config:
             tls_cert=get("CLOUDSIM_TLS_CERT"),
             tls_key=get("CLOUDSIM_TLS_KEY"),
             instance_poll_seconds=number("CLOUDSIM_INSTANCE_POLL_SECONDS"),
-            web_workers=number("CLOUDSIM_WEB_WORKERS"),
+            web_workers=positive("CLOUDSIM_WEB_WORKERS")
+            if get("CLOUDSIM_WEB_WORKERS")
+            else max(2, os.cpu_count() or 1),
+            web_threads=positive("CLOUDSIM_WEB_THREADS"),
             worker_concurrency=number("CLOUDSIM_WORKER_CONCURRENCY"),
             secure_cookies=secure,
             session_hours=number("CLOUDSIM_SESSION_HOURS"),

@@ -104,8 +104,15 @@ def _services(config: Config) -> list[tuple[Service, float]]:
                     "gunicorn",
                     "--bind",
                     config.bind,
+                    # Threads, not one process per connection: a client's connection stays
+                    # open between its requests (keep-alive) instead of a new TCP connection
+                    # and accept per request; CPU work is still spread over the processes.
+                    "--worker-class",
+                    "gthread",
                     "--workers",
                     str(config.web_workers),
+                    "--threads",
+                    str(config.web_threads),
                     "--access-logfile",
                     "-",
                     "--log-level",
