@@ -8,6 +8,7 @@ import secrets
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from cryptography.fernet import Fernet
 
@@ -152,6 +153,22 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_SSH_CONNECTIONS": Setting(
         "256", "SSH connections a worker process keeps open between beats (oldest closed first)"
     ),
+    "CLOUDSIM_PORTAL_URL": Setting(
+        "",
+        "On a master: the https://HOST:PORT/ its team instances upload runs to (its web server,"
+        " serving `cloudsim portal certificate`'s files); empty: instances upload nothing",
+    ),
+    "CLOUDSIM_PORTAL_UPLOAD_SECONDS": Setting(
+        "10", "On a team instance: how often the outbox of finished runs is sent to the master"
+    ),
+    "CLOUDSIM_PORTAL_RETRY_SECONDS": Setting(
+        "5", "On a team instance: the first wait after a failed upload; doubles up to 600 s"
+    ),
+    "CLOUDSIM_PORTAL_WINDOW_GRACE_SECONDS": Setting(
+        "900",
+        "On a master: how long after its task's window an uploaded run may have ended (its stop"
+        " job collecting logs) before it is refused",
+    ),
     "CLOUDSIM_VIEWER_LIVE_HZ": Setting(
         "10", "Frames per simulated second a live 3D viewer receives (the relay's rate)"
     ),
@@ -215,6 +232,10 @@ class Config:
     run_grace_seconds: int
     run_probe_seconds: int
     ssh_connections: int
+    portal_url: str
+    portal_upload_seconds: int
+    portal_retry_seconds: int
+    portal_window_grace_seconds: int
     viewer_live_hz: int
     viewer_live_delay_ms: int
     viewer_poll_ms: int
@@ -336,6 +357,10 @@ class Config:
             run_grace_seconds=number("CLOUDSIM_RUN_GRACE_SECONDS"),
             run_probe_seconds=positive("CLOUDSIM_RUN_PROBE_SECONDS"),
             ssh_connections=positive("CLOUDSIM_SSH_CONNECTIONS"),
+            portal_url=_portal_url(get("CLOUDSIM_PORTAL_URL")),
+            portal_upload_seconds=positive("CLOUDSIM_PORTAL_UPLOAD_SECONDS"),
+            portal_retry_seconds=positive("CLOUDSIM_PORTAL_RETRY_SECONDS"),
+            portal_window_grace_seconds=number("CLOUDSIM_PORTAL_WINDOW_GRACE_SECONDS"),
             viewer_live_hz=number("CLOUDSIM_VIEWER_LIVE_HZ"),
             viewer_live_delay_ms=number("CLOUDSIM_VIEWER_LIVE_DELAY_MS"),
             viewer_poll_ms=number("CLOUDSIM_VIEWER_POLL_MS"),
@@ -343,6 +368,21 @@ class Config:
         )
         values.update(overrides)
         return cls(**values)  # type: ignore[arg-type]
+
+
+def _portal_url(value: str) -> str:
+    """Return the portal's base URL (https, a host, a port), normalised; empty when unset."""
+    value = value.strip()
+    if not value:
+        return ""
+    parsed = urlsplit(value)
+    try:
+        port = parsed.port
+    except ValueError:
+        port = None
+    if parsed.scheme != "https" or not parsed.hostname or port is None:
+        raise ConfigError(f"CLOUDSIM_PORTAL_URL must be https://HOST:PORT/, got {value!r}")
+    return f"https://{parsed.hostname}:{port}/"
 
 
 def _json_object(name: str, get: Callable[[str], str]) -> dict[str, object]:

@@ -10,6 +10,9 @@ from cloudsim.web.inputs import IdConverter, id_param_schema
 
 API_PREFIX = "/api/v1"
 PUBLIC_PATHS = {f"{API_PREFIX}/openapi.json"}
+# paths whose callers are not users: their blueprint checks its own credential (the portal's
+# ingest takes team instances' upload tokens)
+OWN_AUTH_PREFIXES: set[str] = set()
 
 
 def init_api(app: Flask) -> Api:
@@ -25,7 +28,17 @@ def init_api(app: Flask) -> Api:
                 "description": "Everything the web pages do, for scripts. Authenticate with "
                 "'Authorization: Bearer <token>'; create tokens on your account page.",
             },
-            "components": {"securitySchemes": {"bearerAuth": {"type": "http", "scheme": "bearer"}}},
+            "components": {
+                "securitySchemes": {
+                    "bearerAuth": {"type": "http", "scheme": "bearer"},
+                    "uploadToken": {
+                        "type": "http",
+                        "scheme": "bearer",
+                        "description": "a team instance's upload token (cspu_...), which its "
+                        "master hands it in the desired state",
+                    },
+                }
+            },
             "security": [{"bearerAuth": []}],
         },
     )

@@ -8,7 +8,7 @@ from flask import Flask, g, request
 from flask.typing import ResponseReturnValue
 from flask.views import MethodView
 
-from cloudsim.api import API_PREFIX, PUBLIC_PATHS
+from cloudsim.api import API_PREFIX, OWN_AUTH_PREFIXES, PUBLIC_PATHS
 from cloudsim.api.common import Blueprint, caller, columns
 from cloudsim.auth import ssh_keys
 from cloudsim.auth.schemas import (
@@ -30,6 +30,8 @@ def init_bearer_auth(app: Flask) -> None:
     @app.before_request
     def authenticate_api() -> ResponseReturnValue | None:
         if not request.path.startswith(API_PREFIX + "/") or request.path in PUBLIC_PATHS:
+            return None
+        if any(request.path.startswith(prefix) for prefix in OWN_AUTH_PREFIXES):
             return None
         scheme, _, token = request.headers.get("Authorization", "").partition(" ")
         user = user_for_token(token.strip()) if scheme.lower() == "bearer" else None

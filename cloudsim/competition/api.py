@@ -104,6 +104,15 @@ class RunSchema(Schema):
     started_at = fields.DateTime()
     running_at = fields.DateTime(allow_none=True)
     finished_at = fields.DateTime(allow_none=True)
+    instance_id = fields.Int(
+        allow_none=True, metadata={"description": "the team instance it was uploaded from"}
+    )
+    remote_run_id = fields.Int(allow_none=True, metadata={"description": "its id there"})
+    officer_note = fields.Str(allow_none=True)
+    invalidated_at = fields.DateTime(
+        allow_none=True, metadata={"description": "set: an officer invalidated it, not ranked"}
+    )
+    invalid_reason = fields.Str(allow_none=True)
 
 
 class RunDetailSchema(RunSchema):

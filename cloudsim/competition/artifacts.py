@@ -127,6 +127,20 @@ class LogStore:
         obj = self.driver.get_object(self.container_name, name)
         yield from self.driver.download_object_as_stream(obj, chunk_size=CHUNK)
 
+    def stream_from(self, name: str, offset: int) -> Iterator[bytes]:
+        """Yield the stored object from byte `offset` on, in chunks (an upload resuming)."""
+        obj = self.driver.get_object(self.container_name, name)
+        if isinstance(self.driver, LocalStorageDriver):
+            # libcloud's local range download reads the whole file into memory first
+            with open(self.driver.get_object_cdn_url(obj), "rb") as handle:
+                handle.seek(offset)
+                while chunk := handle.read(CHUNK):
+                    yield chunk
+            return
+        if offset >= int(obj.size):
+            return
+        yield from self.driver.download_object_range_as_stream(obj, offset, chunk_size=CHUNK)
+
     def lines(self, name: str) -> Iterator[str]:
         """Yield a stored text object line by line, without holding it whole in memory."""
         pending = b""

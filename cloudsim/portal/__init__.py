@@ -1,17 +1,31 @@
-"""The portal: every team's runs, scores and logs in one place, the leaderboard, the figures."""
+"""The portal: every team's runs, scores and logs in one place, the leaderboard, the figures;
+uploads from team instances (the master's ingest, an instance's outbox), checked and reviewed."""
 
 from __future__ import annotations
+
+from datetime import timedelta
 
 import click
 from flask import Flask
 
 
 def init_app(app: Flask) -> None:
-    """Register this feature's pages with the app."""
-    from cloudsim.portal import views
+    """Register this feature's pages, API and periodic upload with the app."""
+    from cloudsim.api import API_PREFIX, OWN_AUTH_PREFIXES, register_api
+    from cloudsim.jobs.queue import schedule_task
+    from cloudsim.portal import ingest_api, ingest_views, outbox, views
 
     app.register_blueprint(views.bp)
+    app.register_blueprint(ingest_views.bp)
+    OWN_AUTH_PREFIXES.add(API_PREFIX + ingest_api.INGEST_PREFIX)
+    register_api(app, ingest_api.ingest_blp)
+    register_api(app, ingest_api.blp)
+    every = app.config["CLOUDSIM"].portal_upload_seconds
+    schedule_task(app, outbox.TASK, timedelta(seconds=every))
 
 
 def init_cli(cli: click.Group) -> None:
-    """The portal has no commands of its own (`cloudsim leaderboard` is the competition's)."""
+    """Add this feature's commands to `cloudsim` (`cloudsim leaderboard` is the competition's)."""
+    from cloudsim.portal.cli import portal
+
+    cli.add_command(portal)

@@ -1,7 +1,8 @@
 """On a team instance: make this CloudSim what its master says it must be (desired state).
 
 Idempotent: every item is compared with what is here and only differences are changed, so a
-repeated sync changes nothing. What the master manages is put back when it was changed here
+repeated sync changes nothing. It also keeps (encrypted) how to upload finished runs to the
+master's portal. What the master manages is put back when it was changed here
 by hand (drift): its team, the users it lists (their role, team, name, active flag, password
 hash, SSH keys), the tasks it made, and every world definition (a world changed here by hand
 is put back to the master's document and version). Users it does not list (other than
@@ -26,6 +27,7 @@ from cloudsim.errors import Conflict, InvalidInput
 from cloudsim.extensions import db
 from cloudsim.models import Role, Task, Team, TeamInstance, User
 from cloudsim.people.service import create_team, create_user, update_user
+from cloudsim.portal.credentials import store_settings
 from cloudsim.worlds.service import checked, put_world, stored_worlds
 
 
@@ -51,6 +53,8 @@ def apply_desired_state(actor: Actor, desired: dict[str, Any]) -> SyncResult:
     if desired.get("worlds") is not None:  # before the tasks: they are checked against them
         _worlds(desired["worlds"], result)
     _tasks(desired["tasks"], team, result)
+    if store_settings(desired.get("portal")):
+        result.changed.append("portal upload settings updated")
     db.session.flush()
     return result
 

@@ -25,6 +25,15 @@ class InstanceError(CloudSimError):
     status = 502
 
 
+class CallRefused(InstanceError):
+    """The other side answered with an error status (its code and JSON answer kept)."""
+
+    def __init__(self, message: str, code: int, answer: Any) -> None:
+        super().__init__(message)
+        self.code = code
+        self.answer = answer
+
+
 class PinMismatch(InstanceError):
     """The instance's certificate is not the one the master pinned."""
 
@@ -96,12 +105,22 @@ class _PinnedConnection(http.client.HTTPSConnection):
             self._proxy = None
 
 
-def call(endpoint: Endpoint, method: str, path: str, body: Any = None, timeout: float = 10) -> Any:
-    """Call the instance's API (`path` under /api/v1); return the JSON answer, raise otherwise."""
+def call(
+    endpoint: Endpoint,
+    method: str,
+    path: str,
+    body: Any = None,
+    timeout: float = 10,
+    data: bytes | None = None,
+) -> Any:
+    """Call the other side's API (`path` under /api/v1) with a JSON `body` or raw `data`;
+    return the JSON answer, raise otherwise (CallRefused for an error status)."""
     connection = _PinnedConnection(endpoint, timeout)
     headers = {"Authorization": f"Bearer {endpoint.token}", "Accept": "application/json"}
-    payload = None
-    if body is not None:
+    payload = data
+    if data is not None:
+        headers["Content-Type"] = "application/octet-stream"
+    elif body is not None:
         payload = json.dumps(body).encode()
         headers["Content-Type"] = "application/json"
     try:
@@ -120,7 +139,9 @@ def call(endpoint: Endpoint, method: str, path: str, body: Any = None, timeout: 
         raise InstanceError(f"{endpoint.host}: answered {response.status} without JSON") from None
     if response.status >= 300:
         message = answer.get("message") if isinstance(answer, dict) else None
-        raise InstanceError(
-            f"{endpoint.host}: {method} {path} answered {response.status}: {message}"
+        raise CallRefused(
+            f"{endpoint.host}: {method} {path} answered {response.status}: {message}",
+            response.status,
+            answer,
         )
     return answer

@@ -117,12 +117,37 @@ class DesiredWorldSchema(Schema):
     )
 
 
+class DesiredPortalSchema(Schema):
+    url = fields.Str(
+        required=True,
+        validate=[validate.Length(max=255), validate.Regexp(r"^https://[^/\s]+:[0-9]+/$")],
+        metadata={"description": "the master's portal: https://HOST:PORT/"},
+    )
+    ca_cert = fields.Str(required=True, validate=validate.Length(min=1, max=20_000))
+    fingerprint = fields.Str(
+        required=True,
+        validate=validate.Regexp(r"^[0-9a-f]{64}$"),
+        metadata={"description": "SHA-256 of the portal's certificate: pinned"},
+    )
+    token = fields.Str(
+        required=True,
+        validate=[validate.Length(max=200), validate.Regexp(r"^cspu_")],
+        metadata={"description": "the instance's upload token (kept encrypted)"},
+    )
+
+
 class DesiredStateSchema(Schema):
     team = fields.Str(
         allow_none=True,
         load_default=None,
         validate=validate.Length(min=1, max=80),
         metadata={"description": "the instance's team (none: a spare)"},
+    )
+    portal = fields.Nested(
+        DesiredPortalSchema,
+        allow_none=True,
+        load_default=None,
+        metadata={"description": "how to upload finished runs to the master (none: do not)"},
     )
     users = fields.List(
         fields.Nested(DesiredUserSchema), required=True, validate=validate.Length(max=10_000)

@@ -53,7 +53,8 @@ SYNC_LOCK_SECONDS = 60  # longest a sync waits for another one of the same insta
 
 def desired_state(instance: TeamInstance) -> dict[str, Any]:
     """Return what the instance must have: its team, its members and the officers (with
-    their password hashes and SSH keys), the team's tasks and every world; JSON-ready."""
+    their password hashes and SSH keys), the team's tasks, every world, and how it uploads
+    its runs to this master's portal; JSON-ready."""
     team = instance.team
     wanted = User.role == Role.OFFICER
     if team is not None:
@@ -64,8 +65,12 @@ def desired_state(instance: TeamInstance) -> dict[str, Any]:
         if team is not None
         else []
     )
+    from cloudsim.portal.credentials import portal_settings
+
     return {
         "team": team.name if team is not None else None,
+        # where and how the instance uploads its runs (URL, CA, pinned SHA-256, its token)
+        "portal": portal_settings(instance, current_app.config["CLOUDSIM"]),
         "users": [
             {
                 "email": user.email,

@@ -150,6 +150,16 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_competition.StopRun", "POST"): (401, 409, 404, 409, 409),
     ("api_competition.RunLog", "GET"): (401, 200, 404, 200, 200),
     ("api_competition.Leaderboard", "GET"): (401, 200, 200, 200, 200),
+    # the portal's integrity side: officers; uploads take an instance's upload token, no user's
+    ("portal_ingest.refusals", "GET"): (LOGIN, 403, 403, 200, 200),
+    ("portal_ingest.review_run", "POST"): (LOGIN, 403, 403, 302, 302),
+    ("api_portal.Refusals", "GET"): (401, 403, 403, 200, 200),
+    ("api_portal.RunReview", "PATCH"): (401, 403, 403, 200, 200),
+    ("api_portal_ingest.UploadedRun", "PUT"): (401, 401, 401, 401, 401),
+    ("api_portal_ingest.UploadedRun", "GET"): (401, 401, 401, 401, 401),
+    ("api_portal_ingest.UploadedLog", "PUT"): (401, 401, 401, 401, 401),
+    ("api_portal_ingest.UploadedLog", "GET"): (401, 401, 401, 401, 401),
+    ("api_portal_ingest.CompletedUpload", "POST"): (401, 401, 401, 401, 401),
     # team instances (a fresh spare each time): admins only
     ("team_instances.index", "GET"): (LOGIN, 403, 403, 403, 200),
     ("team_instances.deploy", "POST"): (LOGIN, 403, 403, 403, 400),  # an empty form
@@ -274,6 +284,10 @@ def _url(
     if "name" in rule.arguments:
         # a provider's name, or a world's
         values["name"] = "servers" if endpoint.startswith("api_providers") else "vrc_task_1"
+    if "remote_run_id" in rule.arguments:
+        values["remote_run_id"] = 1
+    if "filename" in rule.arguments:
+        values["filename"] = "score.jsonl"
     if "ref" in rule.arguments:
         values["ref"] = constellation_id
     if {"task_id", "run_id"} & set(rule.arguments):

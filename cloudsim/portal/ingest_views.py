@@ -1,0 +1,77 @@
+"""Pages of the portal's integrity side: refused uploads (officers), an officer's review of a
+run, and what the run page says of a run's upload (on an instance) or origin (on a master)."""
+
+from __future__ import annotations
+
+from flask import Blueprint, flash, redirect, render_template, request, url_for
+from flask.typing import ResponseReturnValue
+from flask_login import current_user, login_required
+from flask_wtf import FlaskForm
+from sqlalchemy import select
+from wtforms import BooleanField, TextAreaField
+from wtforms.validators import Length, Optional
+
+from cloudsim.errors import InvalidInput
+from cloudsim.extensions import db
+from cloudsim.models import PortalUpload, Run
+from cloudsim.portal import review
+
+bp = Blueprint("portal_ingest", __name__)
+PAGE = 50
+
+
+class ReviewForm(FlaskForm):
+    """An officer's note on a run, and whether it counts."""
+
+    note = TextAreaField("Note", validators=[Optional(), Length(max=review.MAX_NOTE)])
+    invalidated = BooleanField("Invalidated (does not count in the ranking)")
+    reason = TextAreaField("Why invalidated", validators=[Optional(), Length(max=review.MAX_NOTE)])
+
+
+@bp.app_template_global()
+def portal_upload(run: Run) -> PortalUpload | None:
+    """Return the run's upload to the master (on a team instance), if it has one."""
+    return db.session.scalar(select(PortalUpload).where(PortalUpload.run_id == run.id))
+
+
+@bp.app_template_global()
+def review_form(run: Run) -> ReviewForm:
+    """Return the review form filled with the run's current note and invalidation."""
+    return ReviewForm(
+        formdata=None,
+        note=run.officer_note or "",
+        invalidated=run.invalidated_at is not None,
+        reason=run.invalid_reason or "",
+    )
+
+
+@bp.route("/portal/refusals")
+@login_required
+def refusals() -> ResponseReturnValue:
+    query = review.refusals(current_user)
+    page = db.paginate(query, page=request.args.get("page", 1, type=int), per_page=PAGE)
+    return render_template("portal/refusals.html", page=page)
+
+
+@bp.post("/runs/<int:run_id>/review")
+@login_required
+def review_run(run_id: int) -> ResponseReturnValue:
+    form = ReviewForm()
+    if not form.validate_on_submit():
+        errors = "; ".join(e for field in form.errors.values() for e in field)
+        flash(errors or "The review was not understood.", "error")
+        return redirect(url_for("competition.run", run_id=run_id))
+    try:
+        review.review_run(
+            current_user,
+            run_id,
+            note=form.note.data,
+            invalidated=bool(form.invalidated.data),
+            reason=form.reason.data,
+        )
+    except InvalidInput as exc:
+        db.session.rollback()
+        flash(str(exc), "error")
+        return redirect(url_for("competition.run", run_id=run_id))
+    flash("Review saved.", "info")
+    return redirect(url_for("competition.run", run_id=run_id))

@@ -1,0 +1,95 @@
+"""Officers' side of results integrity: what the portal refused, and their word on a run
+(a note, an invalidation that takes it out of the ranking), every change audited."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import Select, select
+from sqlalchemy.orm import selectinload
+
+from cloudsim.audit.service import record
+from cloudsim.auth.policy import Actor, require_role
+from cloudsim.competition.runs import get_run
+from cloudsim.errors import InvalidInput
+from cloudsim.extensions import db
+from cloudsim.models import PortalRefusal, Role, Run, TeamInstance, utcnow
+from cloudsim.portal.ingest import Refused
+
+MAX_NOTE = 2000
+
+
+def record_refusal(instance: TeamInstance | None, remote_id: int | None, refused: Refused) -> None:
+    """Keep a refusal for officers to see (in the caller's transaction)."""
+    db.session.add(
+        PortalRefusal(
+            instance_id=instance.id if instance is not None else None,
+            team_id=instance.team_id if instance is not None else None,
+            remote_run_id=remote_id,
+            run_id=refused.run_id,
+            reason=str(refused),
+            detail=refused.detail,
+        )
+    )
+    db.session.flush()
+
+
+def refusals(actor: Actor) -> Select[PortalRefusal]:
+    """Return every refused upload, newest first (officers)."""
+    require_role(actor, Role.OFFICER, "see refused uploads")
+    return (
+        select(PortalRefusal)
+        .options(selectinload(PortalRefusal.instance))
+        .order_by(PortalRefusal.id.desc())
+    )
+
+
+def _text(value: str | None, what: str) -> str | None:
+    value = " ".join((value or "").split()) or None
+    if value is not None and len(value) > MAX_NOTE:
+        raise InvalidInput(f"{what} is at most {MAX_NOTE} characters")
+    return value
+
+
+def review_run(
+    actor: Actor,
+    run_id: int,
+    *,
+    note: Any = ...,
+    invalidated: bool | None = None,
+    reason: str | None = None,
+) -> Run:
+    """Set an officer's note on a run, or invalidate it (with a reason) or count it again."""
+    require_role(actor, Role.OFFICER, "review runs")
+    run = get_run(actor, run_id)
+    if note is not ...:
+        text = _text(note, "a note")
+        if text != run.officer_note:
+            run.officer_note = text
+            record(
+                "run.annotate",
+                actor,
+                target_type="run",
+                target_id=run.id,
+                team_id=run.team_id,
+                note=text,
+            )
+    if invalidated is True:
+        why = _text(reason, "the reason")
+        if why is None:
+            raise InvalidInput("say why the run is invalidated (reason)")
+        if run.invalidated_at is None or run.invalid_reason != why:
+            run.invalidated_at, run.invalid_reason = run.invalidated_at or utcnow(), why
+            record(
+                "run.invalidate",
+                actor,
+                target_type="run",
+                target_id=run.id,
+                team_id=run.team_id,
+                reason=why,
+            )
+    elif invalidated is False and run.invalidated_at is not None:
+        run.invalidated_at, run.invalid_reason = None, None
+        record("run.reinstate", actor, target_type="run", target_id=run.id, team_id=run.team_id)
+    db.session.flush()
+    return run
