@@ -157,6 +157,8 @@ class _Sender:
         received = {log["filename"]: int(log["received"]) for log in status["logs"]}
         self._progress(received)
         for artifact in logs:
+            if artifact.filename not in received:
+                raise InstanceError(f"the master has no {artifact.filename} listed for the run")
             while received[artifact.filename] < artifact.size:
                 received[artifact.filename] = self._send_log(artifact, received)
                 self._progress(received)

@@ -71,7 +71,8 @@ def test_a_finished_run_reaches_the_master_through_a_real_worker(
 ) -> None:
     client = instance.test_client()
     sync_instance(portal, client)
-    logs = {"score.jsonl": b'{"checkpoint": 1}\n' * 1000, "state.msgpack": os.urandom(300_000)}
+    # the state log takes two pieces: a full 8 MiB one (over the API's 2 MB bound) and the rest
+    logs = {"score.jsonl": b'{"checkpoint": 1}\n' * 1000, "state.msgpack": os.urandom(9 << 20)}
     run = finished_run("Driving 1", logs, tmp_path)
     worker = worker_process(instance.config["CLOUDSIM"], request.config.rootpath)
     try:
