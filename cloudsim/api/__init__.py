@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from flask import Flask
+from flask import Flask, request
 from flask_smorest import Api, Blueprint
 
 from cloudsim.extensions import csrf
@@ -46,6 +46,17 @@ def init_api(app: Flask) -> Api:
     app.extensions["cloudsim.api"] = api
     api.register_converter(IdConverter, id_param_schema)
     return api
+
+
+def bearer_token() -> str:
+    """Return the request's bearer token ('' when it sends none)."""
+    scheme, _, token = request.headers.get("Authorization", "").partition(" ")
+    return token.strip() if scheme.lower() == "bearer" else ""
+
+
+def unauthenticated(message: str) -> tuple[dict[str, object], int]:
+    """Return the API's answer to a request without a valid credential."""
+    return {"code": 401, "message": message}, 401
 
 
 def register_api(app: Flask, blueprint: Blueprint) -> None:

@@ -8,7 +8,13 @@ from flask import Flask, g, request
 from flask.typing import ResponseReturnValue
 from flask.views import MethodView
 
-from cloudsim.api import API_PREFIX, OWN_AUTH_PREFIXES, PUBLIC_PATHS
+from cloudsim.api import (
+    API_PREFIX,
+    OWN_AUTH_PREFIXES,
+    PUBLIC_PATHS,
+    bearer_token,
+    unauthenticated,
+)
 from cloudsim.api.common import Blueprint, caller, columns
 from cloudsim.auth import ssh_keys
 from cloudsim.auth.schemas import (
@@ -33,11 +39,9 @@ def init_bearer_auth(app: Flask) -> None:
             return None
         if any(request.path.startswith(prefix) for prefix in OWN_AUTH_PREFIXES):
             return None
-        scheme, _, token = request.headers.get("Authorization", "").partition(" ")
-        user = user_for_token(token.strip()) if scheme.lower() == "bearer" else None
+        user = user_for_token(bearer_token())
         if user is None:
-            message = "authentication required: send 'Authorization: Bearer <token>'"
-            return {"code": 401, "message": message}, 401
+            return unauthenticated("authentication required: send 'Authorization: Bearer <token>'")
         g.api_user = user
         return None
 

@@ -10,6 +10,7 @@ from flask import g, request
 from flask.typing import ResponseReturnValue
 from flask.views import MethodView
 
+from cloudsim.api import bearer_token, unauthenticated
 from cloudsim.api.common import Blueprint, SelectPage, caller
 from cloudsim.competition.api import RunSchema
 from cloudsim.errors import NotFound
@@ -42,11 +43,9 @@ blp = Blueprint("api_portal", __name__, description="The portal: refused uploads
 
 @ingest_blp.before_request
 def authenticate_instance() -> ResponseReturnValue | None:
-    scheme, _, token = request.headers.get("Authorization", "").partition(" ")
-    instance = instance_for_token(token.strip()) if scheme.lower() == "bearer" else None
+    instance = instance_for_token(bearer_token())
     if instance is None:
-        message = "an instance's upload token is required: 'Authorization: Bearer cspu_...'"
-        return {"code": 401, "message": message}, 401
+        return unauthenticated("an instance's upload token is required: 'Bearer cspu_...'")
     g.portal_instance = instance
     return None
 
