@@ -207,8 +207,14 @@ def _take(endpoint: Endpoint, payload: LaunchJob, team: str) -> dict[str, Any]:
         raise InstanceError(f"{team} is not on the instance yet: its first sync has not run")
     name = payload.kind  # one team per instance: the kind names its constellation there
     for existing in call(endpoint, "GET", "/constellations?page_size=500"):
-        if existing["name"] == name and existing["state"] not in FAILED:
-            return {"constellation": existing, "job": None}  # a retried job: taken already
+        if existing["name"] != name or existing["state"] == "terminated":
+            continue
+        if existing["state"] == "error":  # launched before and failed: resume it there
+            job = call(endpoint, "POST", f"/constellations/{existing['id']}/retry", timeout=30)
+            return {"constellation": {**existing, "state": "launching"}, "job": job}
+        if existing["state"] == "terminating":
+            raise InstanceError(f"its {name} is terminating: launch again once it is gone")
+        return {"constellation": existing, "job": None}  # a retried job: taken already
     body = {"name": name, "kind": payload.kind, "provider": payload.provider, "team_id": team_id}
     return call(endpoint, "POST", "/constellations", body, timeout=30)  # type: ignore[no-any-return]
 

@@ -5,24 +5,24 @@ instance is reached here (tests/team_instances/test_local_launch.py launches for
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 import yaml
-from click.testing import CliRunner
+from click.testing import Result
 from flask import Flask
 from sqlalchemy import select, text
 
 from cloudsim.auth.policy import SYSTEM
-from cloudsim.cli import main
 from cloudsim.errors import Forbidden, InvalidInput
 from cloudsim.extensions import db
 from cloudsim.models import AuditEvent, InstanceState, Job, Role, Team, TeamInstance
 from cloudsim.providers.service import provider_settings
 from cloudsim.team_instances import launch, service
+from tests.competition.test_cli import run  # noqa: F401 (the fixture)
 from tests.conftest import csrf_token, log_in, make_user, token_for
 from tests.provisioners.providers.servers.keys import make_key_pair
-from tests.support.servers import RedisServer
 
 KEY = make_key_pair("inventory")
 
@@ -128,7 +128,7 @@ def test_api_and_page_as_the_readme_shows_them(app: Flask, team_a: Team) -> None
     # The page's button, really submitted: every team's, with the summary shown.
     log_in(client, admin)
     page = client.get("/team-instances").get_data(as_text=True)
-    assert "Launch for every team" in page
+    assert page.count("Launch for every team") == 1  # the form, once, in the page's body
     form = {"csrf_token": csrf_token(page), "kind": "simple", "provider": "servers"}
     answer = client.post("/team-instances/launch", data=form, follow_redirects=True)
     assert answer.status_code == 200
@@ -163,23 +163,16 @@ def test_an_instance_keeps_provider_settings_its_master_hands_it(app: Flask) -> 
 
 
 def test_cli_as_the_readme_shows_it(
-    tmp_path: Path, redis_server: RedisServer, encryption_key: str
+    run: Callable[..., Result],  # noqa: F811 (`cloudsim` on a database `db upgrade` made)
+    tmp_path: Path,
 ) -> None:
-    env = {
-        "CLOUDSIM_INSTANCE_DIR": str(tmp_path / "instance"),
-        "CLOUDSIM_REDIS_URL": redis_server.url(0),  # a broker, but no worker behind it
-        "CLOUDSIM_ENCRYPTION_KEYS": encryption_key,
-        "CLOUDSIM_LOCAL_PREFIX": "tilch",
-    }
-
     def cli(*args: str, code: int = 0) -> str:
-        result = CliRunner().invoke(main, list(args), env=env)
+        result = run(*args)
         assert result.exit_code == code, result.output
         return result.output
 
     servers = tmp_path / "servers.yaml"
     servers.write_text(yaml.safe_dump(inventory()))
-    cli("db", "upgrade")
     cli("team", "create", "Team 8")
     cli("instance", "deploy", "--name", "team-8", "--team", "Team 8")
     assert "kept (encrypted)" in cli(
