@@ -19,7 +19,7 @@ class Scene(MethodView):
     @blp.response(200)
     def get(self, run_id: int) -> Any:
         """Return the run (and how the caller may view it), its score marks and world shapes."""
-        return service.scene_answer(caller(), run_id)
+        return service.scene_answer(caller(), run_id, current_app.config["CLOUDSIM"])
 
 
 @blp.route("/runs/<int:run_id>/view/frames")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import json
 import os
 import shutil
 import threading
@@ -13,12 +14,14 @@ from typing import Any
 
 from drcsim import rundir
 from drcsim.viewer import StateLogPoses, world_scene
+from sqlalchemy import select
 
 from cloudsim.competition.artifacts import LogStore, artifact_for
 from cloudsim.competition.runs import LIVE, get_run
 from cloudsim.config import Config
 from cloudsim.errors import Conflict, Forbidden, InvalidInput
-from cloudsim.models import Role, Run, RunState, User
+from cloudsim.extensions import db
+from cloudsim.models import Role, Run, RunState, User, World
 
 REPLAY_EVERY = 3  # every third 100 Hz state record: 33 frames per simulated second
 MAX_CHUNK_SECONDS = 30.0
@@ -55,13 +58,26 @@ def live_run_for(actor: User, run_id: int) -> Run:
 
 
 @functools.lru_cache(maxsize=16)
-def _scene(world: str, config: str) -> dict[str, Any]:
-    return world_scene(world, config)
+def _scene(world: str, config: str, document: str) -> dict[str, Any]:
+    return world_scene(world, config, json.loads(document) if document else None)
 
 
-def scene_for(run: Run) -> dict[str, Any]:
-    """Return the run's world as the simulator built it (same world, configuration, seed)."""
-    return _scene(run.task.world, str(run.task.run_config))
+def scene_for(run: Run, config: Config) -> dict[str, Any]:
+    """Return the run's world as the simulator built it (same document, configuration, seed)."""
+    document = world_of(run, config)
+    text = json.dumps(document, sort_keys=True) if document is not None else ""
+    return _scene(run.task.world, str(run.task.run_config), text)
+
+
+def world_of(run: Run, config: Config) -> dict[str, Any] | None:
+    """Return the world document a run was built from: the one kept with its logs, else (a
+    live run's) the one this CloudSim holds; None for a run made before worlds were stored."""
+    kept = artifact_for(run, rundir.WORLD)
+    if kept is not None:
+        found: dict[str, Any] = json.loads(b"".join(LogStore(config).stream(kept.location)))
+        return found
+    stored = db.session.scalar(select(World).where(World.name == run.task.world))
+    return stored.document if stored is not None else None
 
 
 class _Replays:
@@ -112,6 +128,9 @@ def _local_logs(run: Run, config: Config) -> Path:
     for name, artifact in artifacts.items():
         if artifact is None:  # refused before anything is written: no empty folder per request
             raise Conflict(f"run {run.id} has no {name} to replay")
+    world = artifact_for(run, rundir.WORLD)  # rebuild the world the run was built from
+    if world is not None:
+        artifacts[rundir.WORLD] = world
     store = LogStore(config)
     folder.mkdir(parents=True, exist_ok=True)
     for name, artifact in artifacts.items():
@@ -157,7 +176,7 @@ def replay_frames(
     return {"start": start, "seconds": seconds, "frames": frames}
 
 
-def scene_answer(actor: User, run_id: int) -> dict[str, Any]:
+def scene_answer(actor: User, run_id: int, config: Config) -> dict[str, Any]:
     """Return what a viewer loads first: the run, its score marks and its world's shapes."""
     run, mode = viewable_run(actor, run_id)
     return {
@@ -172,7 +191,7 @@ def scene_answer(actor: User, run_id: int) -> dict[str, Any]:
             "falls": run.falls,
         },
         "marks": score_marks(run),
-        "scene": scene_for(run),
+        "scene": scene_for(run, config),
     }
 
 

@@ -35,7 +35,7 @@ def view(run_id: int) -> ResponseReturnValue:
 @bp.route("/runs/<int:run_id>/view/scene")
 @login_required
 def scene(run_id: int) -> ResponseReturnValue:
-    return jsonify(service.scene_answer(current_user, run_id))
+    return jsonify(service.scene_answer(current_user, run_id, current_app.config["CLOUDSIM"]))
 
 
 @bp.route("/runs/<int:run_id>/view/frames")

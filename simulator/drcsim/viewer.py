@@ -166,13 +166,17 @@ class StateLogPoses:
 
     def __init__(self, log_dir: Path) -> None:
         from drcsim.engine import RunOptions, Simulation
-        from drcsim.rundir import read_meta
+        from drcsim.rundir import WORLD, read_meta
+        from drcsim.worlds import read_world_file
 
         meta = read_meta(log_dir)
         self.log_dir = log_dir
-        self.sim = Simulation(
-            meta["world"], meta["config"], RunOptions(time_limit_s=meta["time_limit_s"])
+        handed = log_dir / WORLD  # the world the run was built from, if it was handed over
+        options = RunOptions(
+            time_limit_s=meta["time_limit_s"],
+            world_document=read_world_file(handed) if handed.exists() else None,
         )
+        self.sim = Simulation(meta["world"], meta["config"], options)
         self.client = self.sim.client
         self.bodies = self.sim.state_bodies()
         self._marks: set[tuple[float, int]] = set()  # (t, byte offset) of whole seconds
@@ -232,11 +236,14 @@ class StateLogPoses:
         self.client.disconnect()
 
 
-def world_scene(world: str, config: str | int) -> dict[str, Any]:
-    """Return the description of a world in a run configuration, as a run of it starts."""
-    from drcsim.engine import Simulation
+def world_scene(
+    world: str, config: str | int, document: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """Return the description of a world in a run configuration, as a run of it starts
+    (from `document` if given, else the shipped copy)."""
+    from drcsim.engine import RunOptions, Simulation
 
-    sim = Simulation(world, config)
+    sim = Simulation(world, config, RunOptions(world_document=document))
     try:
         return describe_scene(sim.client, scene_roles(sim))
     finally:

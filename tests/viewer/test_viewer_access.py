@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+from drcsim.engine import RunOptions, Simulation
+from drcsim.worlds import shipped_document
 from flask import Flask
 from flask.testing import FlaskClient
 
@@ -16,11 +18,12 @@ from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext
-from cloudsim.models import Job, Role, RunState, User
+from cloudsim.models import Job, Role, Run, RunState, User
 from cloudsim.people import service
 from cloudsim.viewer import service as viewer_service
 from cloudsim.viewer.live import _key, redis_client, relay_job, store_frame
-from tests.competition.support import finished_run, open_task
+from cloudsim.worlds.service import update_world
+from tests.competition.support import finished_run, open_task, store_log
 from tests.conftest import log_in, make_user, running_app, token_for
 from tests.viewer.conftest import store_run
 
@@ -209,3 +212,51 @@ def test_a_run_without_a_state_log_is_refused_and_leaves_no_cache_behind(
     answer = _client(app, user_a).get(f"/runs/{run.id}/view/frames")
     assert answer.status_code == 409 and "no meta.json to replay" in answer.get_data(as_text=True)
     assert not (app.config["CLOUDSIM"].instance_dir / "viewer" / f"run-{run.id}").exists()
+
+
+def _close_replays() -> None:
+    for poses, _ in viewer_service._replays.open.values():
+        poses.close()
+    viewer_service._replays.open.clear()
+
+
+@pytest.fixture
+def fresh_replays() -> Iterator[None]:
+    """Close the replays this process keeps open by run id (each test's runs start at 1)."""
+    _close_replays()
+    yield
+    _close_replays()
+
+
+@pytest.mark.usefixtures("fresh_replays")
+def test_the_scene_and_replay_are_of_the_world_the_run_was_built_from(
+    app: Flask, people: dict[str, User | None], tmp_path: Path
+) -> None:
+    user_a = people["user_a"]
+    assert user_a is not None and user_a.team is not None
+    world = shipped_document("vrc_task_2")
+    world["objects"][0]["pose"] = [4.5, 0.5, 0.0]  # gate_1 moved
+    folder = tmp_path / "run"
+    sim = Simulation("vrc_task_2", "1", RunOptions(log_dir=folder, world_document=world))
+    sim.step(300)
+    sim.close()
+    run = store_run(user_a.team, folder)
+    store_log(run, folder / "world.json", "world.json")
+    db.session.commit()
+    client = _client(app, user_a)
+    scene = client.get(f"/runs/{run.id}/view/scene").get_json()["scene"]
+    assert scene["roles"]["gates"]["gate_1"]["x"] == 4.5
+    frames = client.get(f"/runs/{run.id}/view/frames?start=0&seconds=0.2").get_json()["frames"]
+    assert len(frames) == 6  # every 30 ms up to 0.2 s, from the state log rebuilt on...
+    replayed = viewer_service._replays.open[run.id][0]  # ...the world the run was built from
+    assert replayed.sim.scene.gates["gate_1"].x == 4.5
+    # a live run (no logs kept yet) is drawn from the world this CloudSim holds
+    world["objects"][0]["pose"] = [5.5, 0.0, 0.0]
+    update_world(SYSTEM, world)
+    task = open_task(user_a.team.id)
+    live = Run(task_id=task.id, team_id=task.team_id, state=RunState.RUNNING)
+    db.session.add(live)
+    db.session.commit()
+    officer = _client(app, people["officer"])
+    scene = officer.get(f"/runs/{live.id}/view/scene").get_json()["scene"]
+    assert scene["roles"]["gates"]["gate_1"]["x"] == 5.5
