@@ -93,6 +93,13 @@ def _task_for(instance: TeamInstance, record_: dict[str, Any]) -> Task:
             f"the run was of {record_['world']} #{record_['run_config']}, its task "
             f"{task.name!r} is {task.world} #{task.run_config}"
         )
+    terms = (task.uplink_bits, task.downlink_bits, task.timeout_s)
+    sent = (record_["uplink_bits"], record_["downlink_bits"], record_["timeout_s"])
+    if sent != terms:
+        raise Refused(
+            f"the run's caps and timeout {sent} are not its task's {terms} (uplink bits, "
+            "downlink bits, seconds)"
+        )
     return task
 
 

@@ -1,0 +1,134 @@
+"""The portal's upload API as a stranger uses it: the bodies the README and the OpenAPI
+document describe, written by hand, a log sent in two pieces with a look at the offset."""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable, Iterator
+from datetime import timedelta
+
+import pytest
+from flask import Flask
+
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.models import Role, TeamInstance, utcnow
+from cloudsim.portal.credentials import upload_token
+from tests.conftest import make_user, running_app, token_for
+
+
+@pytest.fixture
+def master(make_config: Callable[..., Config]) -> Iterator[Flask]:
+    with running_app(make_config(portal_url="https://127.0.0.1:5443/")) as app:
+        yield app
+
+
+def test_a_run_and_its_log_uploaded_as_documented(master: Flask) -> None:
+    client = master.test_client()
+    admin, officer = token_for(make_user(Role.ADMIN)), token_for(make_user(Role.OFFICER))
+    team = client.post("/api/v1/teams", json={"name": "Team A"}, headers=officer).json
+    now = utcnow()
+    task = client.post(
+        "/api/v1/tasks",
+        json={
+            "name": "Walking 1",
+            "world": "vrc_task_2",
+            "run_config": 1,
+            "start": (now - timedelta(hours=1)).strftime("%Y-%m-%d %H:%M"),
+            "stop": (now + timedelta(hours=1)).strftime("%Y-%m-%d %H:%M"),
+            "time_zone": "UTC",
+            "uplink_bits": 115_200,
+            "downlink_bits": 59_000_000,
+            "team_ids": [team["id"]],
+        },
+        headers=officer,
+    ).json[0]
+    deployed = client.post(
+        "/api/v1/team-instances",
+        json={"name": "ti-a", "provider": "local", "team_id": team["id"]},
+        headers=admin,
+    )
+    assert deployed.status_code == 202, deployed.json
+    instance = db.session.get(TeamInstance, deployed.json[0]["instance"]["id"])
+    assert instance is not None
+    # what the desired state hands the instance as "portal": {"token": ...}
+    uploader = {"Authorization": f"Bearer {upload_token(instance)}"}
+    db.session.commit()
+    log = b'{"t": 1.0, "checkpoint": 1}\n' * 5000
+    started = now - timedelta(minutes=30)
+    record = {
+        "team": "Team A",
+        "task_key": f"m{task['id']}",
+        "task_name": "Walking 1",
+        "world": "vrc_task_2",
+        "run_config": 1,
+        "state": "finished",
+        "end_reason": "time_limit",
+        "score": 1,
+        "falls": 0,
+        "sim_seconds": 1800.0,
+        "uplink_bits_used": 100_000,
+        "downlink_bits_used": 1_000_000,
+        "uplink_bits": 115_200,
+        "downlink_bits": 59_000_000,
+        "timeout_s": task["timeout_s"],
+        "seconds_left": 0.0,
+        "started_at": started.isoformat(),
+        "finished_at": (started + timedelta(minutes=31)).isoformat(),
+        "score_events": [
+            {
+                "kind": "checkpoint",
+                "checkpoint": 1,
+                "points": 1,
+                "sim_time": 412.5,
+                "wall_time": (started + timedelta(seconds=413)).isoformat(),
+            }
+        ],
+        "logs": [
+            {
+                "filename": "score.jsonl",
+                "kind": "score",
+                "size": len(log),
+                "sha256": hashlib.sha256(log).hexdigest(),
+            }
+        ],
+    }
+    base = "/api/v1/portal/ingest/runs/7"
+    sent = client.put(base, json=record, headers=uploader)
+    assert sent.status_code == 200, sent.json
+    assert sent.json["logs"][0]["received"] == 0 and not sent.json["complete"]
+    half = len(log) // 2
+    piece = client.put(
+        f"{base}/logs/score.jsonl?offset=0",
+        data=log[:half],
+        headers=uploader,
+        content_type="application/octet-stream",
+    )
+    assert piece.status_code == 200 and piece.json["received"] == half, piece.json
+    assert client.post(f"{base}/complete", headers=uploader).status_code == 409  # not all yet
+    where = client.get(f"{base}/logs/score.jsonl", headers=uploader).json["received"]
+    rest = client.put(
+        f"{base}/logs/score.jsonl?offset={where}",
+        data=log[where:],
+        headers=uploader,
+        content_type="application/octet-stream",
+    )
+    assert rest.status_code == 200 and rest.json["complete"], rest.json
+    done = client.post(f"{base}/complete", headers=uploader)
+    assert done.status_code == 200 and done.json["complete"]
+    run = client.get(f"/api/v1/runs/{done.json['run_id']}", headers=officer).json
+    assert (run["instance_id"], run["remote_run_id"], run["score"]) == (instance.id, 7, 1)
+    assert run["score_events"][0]["sim_time"] == 412.5
+    stored = client.get(
+        f"/api/v1/runs/{run['id']}/logs/{run['artifacts'][0]['id']}", headers=officer
+    )
+    assert stored.data == log
+    assert stored.headers["X-Checksum-SHA256"] == hashlib.sha256(log).hexdigest()
+    # the same body again: the same run; other caps than the task's: refused
+    assert client.put(base, json=record, headers=uploader).json["run_id"] == run["id"]
+    other = client.put(
+        "/api/v1/portal/ingest/runs/8", json=dict(record, uplink_bits=1), headers=uploader
+    )
+    assert other.status_code == 403 and "caps" in other.json["message"]
+    # a user's API token is no upload token
+    assert client.put(base, json=record, headers=officer).status_code == 401
