@@ -17,6 +17,7 @@ from sqlalchemy import func, select
 
 from cloudsim.config import Config
 from cloudsim.extensions import db
+from cloudsim.launched_constellations.keys import deployment_ca
 from cloudsim.models import (
     Artifact,
     PortalRefusal,
@@ -30,6 +31,7 @@ from cloudsim.models import (
 from cloudsim.portal import outbox
 from cloudsim.portal.credentials import portal_endpoint
 from cloudsim.team_instances.client import call
+from provisioners.remote import pki
 from tests.conftest import csrf_token, log_in, make_user, running_app
 from tests.portal.ingest_support import Portal, finished_run, start_master, sync_instance
 from tests.support.servers import free_port, wait_for
@@ -285,3 +287,22 @@ def test_an_invalidated_run_leaves_the_ranking_and_the_leaderboard_says_so(
     with portal.on_master():
         reviewed = db.session.get(Run, run_id)
         assert reviewed is not None and reviewed.officer_note == "checked again"
+
+
+def test_an_instance_sends_nothing_to_a_portal_with_another_certificate(
+    portal: Portal, instance: Flask, tmp_path: Path
+) -> None:
+    sync_instance(portal, instance.test_client())
+    run = finished_run("Driving 1", {"score.jsonl": b"{}\n"}, tmp_path)
+    portal.server.kill()
+    with portal.on_master():  # the same CA and address, not the pinned certificate
+        impostor = pki.issue_tls_server(deployment_ca(), "impostor", ["127.0.0.1"])
+    folder = portal.server.config.instance_dir / "tls"
+    (folder / "portal.crt").write_text(impostor.cert_pem)
+    (folder / "portal.key").write_text(impostor.key_pem)
+    portal.server.start()
+    assert outbox.upload_outbox(instance.config["CLOUDSIM"]) == 0
+    row = db.session.scalar(select(PortalUpload).where(PortalUpload.run_id == run.id))
+    assert row is not None and row.state == UploadState.PENDING
+    assert row.error and "does not match the pinned one" in row.error
+    assert _master_run(portal, run.id) is None
