@@ -4,17 +4,23 @@ document describe, written by hand, a log sent in two pieces with a look at the 
 from __future__ import annotations
 
 import hashlib
+import json
 from collections.abc import Callable, Iterator
 from datetime import timedelta
+from pathlib import Path
 
 import pytest
+from click.testing import CliRunner
 from flask import Flask
 
+from cloudsim.cli import main
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.models import Role, TeamInstance, utcnow
 from cloudsim.portal.credentials import upload_token
+from provisioners.remote import pki
 from tests.conftest import make_user, running_app, token_for
+from tests.support.servers import RedisServer
 
 
 @pytest.fixture
@@ -132,3 +138,29 @@ def test_a_run_and_its_log_uploaded_as_documented(master: Flask) -> None:
     assert other.status_code == 403 and "caps" in other.json["message"]
     # a user's API token is no upload token
     assert client.put(base, json=record, headers=officer).status_code == 401
+
+
+def test_cli_as_the_readme_shows_it(
+    tmp_path: Path, redis_server: RedisServer, encryption_key: str
+) -> None:
+    env = {
+        "CLOUDSIM_INSTANCE_DIR": str(tmp_path / "instance"),
+        "CLOUDSIM_REDIS_URL": redis_server.url(0),
+        "CLOUDSIM_ENCRYPTION_KEYS": encryption_key,
+    }
+    assert CliRunner().invoke(main, ["db", "upgrade"], env=env).exit_code == 0
+    out = tmp_path / "portal"
+    unset = CliRunner().invoke(main, ["portal", "certificate", "--out", str(out)], env=env)
+    assert unset.exit_code == 1 and "CLOUDSIM_PORTAL_URL" in unset.output
+    env["CLOUDSIM_PORTAL_URL"] = "https://198.18.0.1:5443"
+    made = CliRunner().invoke(main, ["portal", "certificate", "--out", str(out), "--json"], env=env)
+    assert made.exit_code == 0, made.output
+    shown = json.loads(made.output)
+    cert = Path(shown["cert"]).read_text()
+    assert shown["host"] == "198.18.0.1" and shown["sha256"] == pki.certificate_fingerprint(cert)
+    assert Path(shown["key"]).stat().st_mode & 0o777 == 0o600
+    listed = CliRunner().invoke(main, ["portal", "refusals", "--json"], env=env)
+    assert listed.exit_code == 0 and json.loads(listed.output) == []
+    env["CLOUDSIM_PORTAL_URL"] = "http://198.18.0.1:5443/"
+    bad = CliRunner().invoke(main, ["portal", "refusals"], env=env)
+    assert bad.exit_code != 0 and "https://HOST:PORT/" in bad.output
