@@ -14,6 +14,17 @@ from cloudsim.people.service import update_user
 from tests.conftest import PASSWORD, csrf_token, log_in
 
 
+def test_form_fields_carry_only_the_autocomplete_hints_given(
+    app: Flask, people: dict[str, User | None]
+) -> None:
+    login = app.test_client().get("/login").get_data(as_text=True)
+    assert 'autocomplete="username"' in login and 'autocomplete="current-password"' in login
+    client = app.test_client()
+    log_in(client, people["user_a"])
+    account = client.get("/account").get_data(as_text=True)
+    assert "<input" in account and 'autocomplete="None"' not in account
+
+
 def test_login_needs_csrf_and_the_right_password(
     app: Flask, people: dict[str, User | None]
 ) -> None:
@@ -125,5 +136,5 @@ def test_openapi_describes_every_api_route(app: Flask) -> None:
     assert spec["components"]["securitySchemes"]["bearerAuth"]["scheme"] == "bearer"
     for rule in app.url_map.iter_rules():
         if rule.rule.startswith("/api/v1/") and "openapi" not in rule.rule:
-            documented = re.sub(r"<(?:int:)?(\w+)>", r"{\1}", rule.rule)
+            documented = re.sub(r"<(?:\w+:)?(\w+)>", r"{\1}", rule.rule)
             assert documented in paths, f"{rule.rule} is not in the OpenAPI description"
