@@ -177,11 +177,13 @@ def launch(
     with app_context():
         refs: list[int | str] | None = None if every else list(names)
         summary = launches.launch(SYSTEM, kind, provider, refs)
-        if wait:
-            for outcome in summary:
+        going = [o for o in summary if o.state == "launching"]
+        if wait and going:
+            for outcome in going:
                 if outcome.job_id:
                     follow_job(outcome.job_id, True)
-            summary = _wait([o.instance_id for o in summary])
+            seen = {o.instance_id: o for o in _wait([o.instance_id for o in going])}
+            summary = [seen.get(o.instance_id, o) for o in summary]
         emit(
             [dataclasses.asdict(o) for o in summary],
             as_json,

@@ -106,6 +106,8 @@ def outcome(instance: TeamInstance, job_id: str | None = None) -> Outcome:
     launch = instance.launch or {}
     state = launch.get("state")
     team = instance.team.name if instance.team else None
+    if state is None:
+        return Outcome(instance.id, instance.name, team, "failed", "not launched", job_id)
     if state == "ready":
         return Outcome(instance.id, instance.name, team, "ready", job_id=job_id)
     if state in FAILED:

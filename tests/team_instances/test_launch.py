@@ -178,10 +178,11 @@ def test_cli_as_the_readme_shows_it(
     assert "kept (encrypted)" in cli(
         "instance", "provider", "team-8", "servers", "--inventory", str(servers)
     )
-    (row,) = json.loads(cli("instance", "launch", "--all", "--kind", "vrc", "--json"))
+    (row,) = json.loads(cli("instance", "launch", "team-8", "--kind", "vrc", "--wait", "--json"))
     assert (row["instance"], row["state"], row["why"]) == (
         "team-8",
         "failed",
         "the instance is deploying",
     )
+    assert json.loads(cli("instance", "launch", "--all", "--json"))[0]["why"] == row["why"]
     assert "name instances or give --all" in cli("instance", "launch", code=2)
