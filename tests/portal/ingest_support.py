@@ -98,15 +98,20 @@ class MasterServer:
                 pass
         self.process.wait()
         self.process = None
+        # its worker may hold the listening socket a moment longer: a restart must not
+        # mistake the dying one for the new one
+        wait_for(lambda: not port_accepts(self.port), 10, "the old server gone")
 
 
 @dataclass
 class Portal:
-    """A master (its app, its server) and one team instance of Team A (the test's app)."""
+    """A master (its app, its server) with a team instance for Team A (the test's app) and
+    one for Team B."""
 
     master: Flask
     server: MasterServer
-    instance_id: int  # the TeamInstance on the master
+    instance_id: int  # Team A's TeamInstance on the master
+    other_instance_id: int  # Team B's
     task_ids: dict[str, int]  # the master's tasks by name
     officer_token: dict[str, str]
     user_token: dict[str, str]
@@ -126,7 +131,7 @@ class Portal:
 
 
 def start_master(config: Config, root: Path) -> Portal:
-    """Make a master (teams A and B, a task each, an officer, Team A's instance) and serve it."""
+    """Make a master (teams A and B, their tasks, an officer, an instance each) and serve it."""
     master = create_app(config)
     master.test_client_class = IsolatedClient
     with master.app_context():
@@ -139,17 +144,24 @@ def start_master(config: Config, root: Path) -> Portal:
             "Theirs": open_task(team_b.id, name="Theirs", window_start=opened).id,
         }
         officer, user = make_user(Role.OFFICER), make_user(Role.USER, team_a)
-        constellation = Constellation(
-            name="ti-a", kind="cloudsim", provider="local", state=ConstellationState.READY
+        instance, other = (
+            TeamInstance(
+                name=name,
+                team=team,
+                constellation=Constellation(
+                    name=name, kind="cloudsim", provider="local", state=ConstellationState.READY
+                ),
+            )
+            for name, team in (("ti-a", team_a), ("ti-b", team_b))
         )
-        instance = TeamInstance(name="ti-a", team=team_a, constellation=constellation)
-        db.session.add(instance)
+        db.session.add_all([instance, other])
         db.session.flush()
         write_certificate(config, config.instance_dir / "tls")
         portal = Portal(
             master,
             MasterServer(config, int(config.portal_url.rsplit(":", 1)[1].strip("/")), root),
             instance.id,
+            other.id,
             tasks,
             token_for(officer),
             token_for(user),
@@ -159,12 +171,13 @@ def start_master(config: Config, root: Path) -> Portal:
     return portal
 
 
-def sync_instance(portal: Portal, client: Any) -> dict[str, Any]:
-    """Send the instance its desired state from the master, through the documented API."""
+def sync_instance(portal: Portal, client: Any, instance_id: int | None = None) -> dict[str, Any]:
+    """Send an instance (Team A's unless told) its desired state from the master, through the
+    documented API."""
     with portal.on_master():
-        state = json.loads(
-            json.dumps(desired_state(db.session.get(TeamInstance, portal.instance_id)))
-        )  # type: ignore[arg-type]
+        instance = db.session.get(TeamInstance, instance_id or portal.instance_id)
+        assert instance is not None
+        state = json.loads(json.dumps(desired_state(instance)))
     admin = token_for(make_user(Role.ADMIN))
     answer = client.put("/api/v1/instance/desired-state", json=state, headers=admin)
     assert answer.status_code == 200, answer.json
@@ -177,6 +190,7 @@ def finished_run(
     tmp: Path,
     *,
     score: int = 2,
+    uplink_bits_used: int = 50_000,
     started_ago: timedelta = timedelta(minutes=20),
 ) -> Run:
     """On the instance: a finished run of the master's task with its logs stored (committed)."""
@@ -190,7 +204,7 @@ def finished_run(
         score=score,
         falls=1,
         sim_seconds=600.0,
-        uplink_bits_used=50_000,
+        uplink_bits_used=uplink_bits_used,
         downlink_bits_used=9_000_000,
         end_reason="time_limit",
         started_at=started,

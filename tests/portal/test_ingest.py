@@ -8,6 +8,7 @@ import hashlib
 import os
 import threading
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from datetime import timedelta
 from pathlib import Path
 
@@ -306,3 +307,32 @@ def test_an_instance_sends_nothing_to_a_portal_with_another_certificate(
     assert row is not None and row.state == UploadState.PENDING
     assert row.error and "does not match the pinned one" in row.error
     assert _master_run(portal, run.id) is None
+
+
+def test_two_instances_runs_are_ranked_together_a_tie_broken_by_bits(
+    portal: Portal, instance: Flask, make_config: Callable[..., Config], tmp_path: Path
+) -> None:
+    sync_instance(portal, instance.test_client())
+    run_a = finished_run("Driving 1", {}, tmp_path, uplink_bits_used=600_000).id
+    assert outbox.upload_outbox(instance.config["CLOUDSIM"]) == 1
+    config_b = replace(
+        instance.config["CLOUDSIM"],
+        instance_dir=tmp_path / "instance-b",
+        database_url=f"sqlite:///{tmp_path / 'instance-b.db'}",
+    )
+    (tmp_path / "instance-b").mkdir(mode=0o700)
+    with running_app(config_b) as team_b_instance:
+        sync_instance(portal, team_b_instance.test_client(), portal.other_instance_id)
+        run_b = finished_run("Theirs", {}, tmp_path / "b", uplink_bits_used=300_000).id
+        assert outbox.upload_outbox(config_b) == 1
+    board = portal.master_client().get("/api/v1/leaderboard", headers=portal.officer_token).json
+    # two checkpoints each; Team B left more of its uplink cap (1,000,000 bits) unused
+    assert [(s["rank"], s["team"], s["checkpoints"]) for s in board] == [
+        (1, "Team B", 2),
+        (2, "Team A", 2),
+    ]
+    assert board[0]["uplink_share_left"] == pytest.approx(0.7)
+    assert board[1]["uplink_share_left"] == pytest.approx(0.4)
+    with portal.on_master():
+        sources = {(r.instance_id, r.remote_run_id) for r in db.session.scalars(select(Run))}
+    assert sources == {(portal.instance_id, run_a), (portal.other_instance_id, run_b)}
