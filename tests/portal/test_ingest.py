@@ -110,6 +110,11 @@ def test_a_finished_run_reaches_the_master_through_a_real_worker(
         )
         assert hashlib.sha256(body.data).hexdigest() == artifact["sha256"]
         assert body.data == logs[artifact["filename"]]
+    browser = portal.master_client()
+    with portal.on_master():
+        log_in(browser, make_user(Role.OFFICER))
+    shown_page = browser.get(f"/runs/{master_run_id}").get_data(as_text=True)
+    assert f"ti-a (its run {run.id})" in shown_page and "all received and checked" in shown_page
     # the instance's run page says so
     log_in(client, make_user(Role.OFFICER))
     page = client.get(f"/runs/{run.id}").get_data(as_text=True)
