@@ -1,26 +1,24 @@
 """Benchmark the portal at season scale: p50/p95 of the leaderboard, figures and exports.
 
-Seeds a season (bench/web.py's: 30 teams x 15 finished runs with stored score logs and
-30-minute bandwidth logs) into a fresh instance, starts the production stack with
-`cloudsim up` and drives the portal's pages with 20 clients (officers and team users), against
-the anonymous login page as the reference measured in the same run. Each step of the run
-(seeding the season, then the pages under load) prints its own figures.
+Seeds a season's teams, people and machines (bench/web.py's seed) into a fresh instance,
+starts the production stack with `cloudsim up`, uploads its 450 runs (30 teams x 15, a score
+log and a 30-minute bandwidth log each) through the portal's ingest API from 30 team
+instances at once (timed), then drives the portal's pages with 20 clients (officers and team
+users), against the anonymous login page as the reference measured in the same run.
 Usage: python -m bench.portal [--db sqlite|postgresql|both] [--clients 20] [--rounds 6]
 """
 
 from __future__ import annotations
 
-import os
 import statistics
 import tempfile
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 from flask import Flask
 from sqlalchemy import select
 
+from bench.portal_ingest import prepare, upload
 from bench.web import (
     Visitor,
     arguments,
@@ -49,26 +47,8 @@ OFFICER_PAGES = [
     "/portal/results.csv",
     "/portal/results.json",
 ]
+RUNS_PER_TEAM = 15
 USER_PAGES = ["/leaderboard", "/leaderboard/standings", "/portal", "/portal/figures"]
-
-
-@dataclass
-class Season:
-    """A seeded instance: its environment, folder and how long each step took to fill it."""
-
-    env: dict[str, str]
-    instance: Path
-    steps: dict[str, float]
-
-
-def seed_season(season: Season) -> None:
-    """Fill the database with the season's rows and stored logs (bench/web.py's seed)."""
-    seed(season.env)
-
-
-# The steps that bring a season into the portal, each timed and reported; a step that sends
-# the runs through the team instances' upload instead of writing rows goes here too.
-STEPS: list[tuple[str, Callable[[Season], None]]] = [("seed 450 runs as rows", seed_season)]
 
 
 def visitors(env: dict[str, str], clients: int) -> list[Visitor]:
@@ -112,27 +92,34 @@ def in_process(app: Flask, visitors: list[Visitor], repeat: int = 5) -> dict[str
 
 
 def measure(label: str, database_url: str | None, clients: int, rounds: int) -> None:
-    """Bring a season in step by step, load the portal's pages, print the tables."""
+    """Seed a season's people, upload its runs as team instances do, load the portal's pages."""
     instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-portal-"))
-    season = Season(bench_env(instance, database_url), instance, {})
-    for name, step in STEPS:
-        started = time.perf_counter()
-        step(season)
-        season.steps[name] = time.perf_counter() - started
-    load = os.getloadavg()
-    print(f"\nportal benchmark on {label}; load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}")
-    for name, seconds in season.steps.items():
-        print(f"{name}: {seconds:.1f} s")
-    clients_of = visitors(season.env, clients)
-    app = create_app(Config.from_env(season.env))
-    kinds = {v.email.split("@")[0].rstrip("0123456789"): v for v in clients_of}
-    with stack(season.env, instance) as base:  # its Redis: logging in counts attempts there
+    # the instances are stand-ins: the beat's health poll must not call them meanwhile
+    env = dict(bench_env(instance, database_url), CLOUDSIM_INSTANCE_POLL_SECONDS="86400")
+    started = time.perf_counter()
+    seed(env, runs=0)  # teams, people, machines, jobs: the runs arrive through the portal
+    seeding = time.perf_counter() - started
+    app = create_app(Config.from_env(env))
+    uploaders = prepare(app, RUNS_PER_TEAM)
+    with stack(env, instance) as base:  # its Redis: logging in counts attempts there
+        ingest = upload(base, uploaders)
+        clients_of = visitors(env, clients)
+        kinds = {v.email.split("@")[0].rstrip("0123456789"): v for v in clients_of}
         queries = count_queries(app, kinds)
         started = time.perf_counter()
         timings = drive(base, {}, clients, rounds, lambda number: clients_of[number])
         wall = time.perf_counter() - started
         costs = in_process(app, list(kinds.values()))  # once the stack has settled
-    report(label, seeded(app), sum(season.steps.values()), timings, queries, wall, clients)
+    config = app.config["CLOUDSIM"]
+    server = f"gunicorn {config.web_workers} workers x {config.web_threads} threads"
+    report(label, seeded(app), seeding, timings, queries, wall, clients, server)
+    print(
+        f"ingest: {ingest['runs']} runs from {ingest['instances']} team instances at once "
+        f"(record, {ingest['bytes'] / ingest['runs'] / 1e3:.0f} kB of logs, acknowledgement) "
+        f"in {ingest['seconds']:.1f} s: {ingest['runs'] / ingest['seconds']:.1f} runs/s, "
+        f"{ingest['bytes'] / ingest['seconds'] / 1e6:.1f} MB/s; per run p50 "
+        f"{1000 * ingest['p50']:.0f} ms, p95 {1000 * ingest['p95']:.0f} ms"
+    )
     reference = next(v for k, v in costs.items() if k.startswith("reference"))
     print("in-process, one request at a time (median of 5), against the login page:")
     for name, ms in sorted(costs.items()):

@@ -72,8 +72,9 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def seed(env: dict[str, str]) -> dict[str, str]:
-    """Fill a fresh database with a season; return the admin's API headers."""
+def seed(env: dict[str, str], runs: int = 15) -> dict[str, str]:
+    """Fill a fresh database with a season (`runs` finished runs per team); return the
+    admin's API headers."""
     app = create_app(Config.from_env(env))
     migrate.upgrade(app)
     with app.app_context():
@@ -99,7 +100,7 @@ def seed(env: dict[str, str]) -> dict[str, str]:
         store = LogStore(app.config["CLOUDSIM"])
         # a 30-minute run's bandwidth log: what the run page charts
         add_season(
-            store, teams, password_hash, users=0, runs=15, jobs=34, events=8, log_seconds=1800
+            store, teams, password_hash, users=0, runs=runs, jobs=34, events=8, log_seconds=1800
         )
         token = issue_token(admin, "bench").plaintext
         db.session.commit()  # services only flush: the seeding is the boundary here
