@@ -6,10 +6,12 @@ from typing import Any
 
 from flask.views import MethodView
 from marshmallow import Schema, fields, validate
+from sqlalchemy.orm import selectinload
 
 from cloudsim.api.common import Blueprint, SelectPage, caller
 from cloudsim.competition import runs as run_service
 from cloudsim.competition import schedule, season
+from cloudsim.models import Run, RunState, UploadState
 from cloudsim.web.inputs import INT64_MAX, Id, Int
 
 blp = Blueprint("api_competition", __name__, description="Tasks, runs, logs and scores")
@@ -79,6 +81,52 @@ class ArtifactSchema(Schema):
     created_at = fields.DateTime()
 
 
+class RunUploadSchema(Schema):
+    state = fields.Str(
+        metadata={
+            "description": "pending, uploading, uploaded or refused",
+            "enum": list(UploadState),
+        }
+    )
+    percent = fields.Int(metadata={"description": "how much of the run's logs the master has"})
+    portal_run_id = fields.Int(
+        allow_none=True, metadata={"description": "the run's id on the master (its portal)"}
+    )
+    error = fields.Str(
+        allow_none=True,
+        metadata={"description": "refused: why; pending or uploading: the last failure"},
+    )
+    next_attempt_at = fields.DateTime(
+        allow_none=True,
+        metadata={"description": "pending or uploading: when it is sent (again); else null"},
+    )
+
+
+class UploadField(fields.Nested):
+    """A run's upload to the master's portal, as a team instance sees it (null: none)."""
+
+    def _serialize(self, nested_obj: Any, attr: Any, obj: Any, **kwargs: Any) -> Any:  # type: ignore[override]  # Nested renames Field's value
+        run, value = obj, nested_obj
+        if value is None:
+            ended = run.state in (RunState.FINISHED, RunState.ERROR)
+            if not (ended and run.task.master_key):
+                return None  # a master's run, an instance's own task's, a live one
+            # the master's task's ended run: the next upload beat gives it its outbox row
+            status = {"state": UploadState.PENDING, "percent": 0}
+        else:
+            waiting = value.state in (UploadState.PENDING, UploadState.UPLOADING)
+            status = {
+                "state": value.state,
+                "percent": value.percent,
+                "portal_run_id": value.master_run_id,
+                "error": value.error,
+                "next_attempt_at": value.next_attempt_at if waiting else None,
+            }
+        return super()._serialize(
+            dict.fromkeys(("portal_run_id", "error", "next_attempt_at")) | status, attr, obj
+        )
+
+
 class RunSchema(Schema):
     id = fields.Int()
     task_id = fields.Int()
@@ -113,6 +161,14 @@ class RunSchema(Schema):
         allow_none=True, metadata={"description": "set: an officer invalidated it, not ranked"}
     )
     invalid_reason = fields.Str(allow_none=True)
+    upload = UploadField(
+        RunUploadSchema,
+        allow_none=True,
+        metadata={
+            "description": "on a team instance: the run's upload to the master's portal; null "
+            "for a run that is not uploaded (a master's own, a live one, an instance's own task's)"
+        },
+    )
 
 
 class RunDetailSchema(RunSchema):
@@ -211,7 +267,7 @@ class Runs(MethodView):
     @blp.paginate(SelectPage, page_size=50, max_page_size=500)
     def get(self) -> Any:
         """List runs (a team user: their team's)."""
-        return run_service.visible_runs(caller())
+        return run_service.visible_runs(caller()).options(selectinload(Run.upload))
 
 
 @blp.route("/runs/<int:run_id>")

@@ -14,6 +14,7 @@ from cloudsim.models.base import Base, UTCDateTime, str_enum, utcnow
 if TYPE_CHECKING:
     from cloudsim.models.machines import Constellation
     from cloudsim.models.people import Team, User
+    from cloudsim.models.portal import PortalUpload
     from cloudsim.models.team_instances import TeamInstance
 
 
@@ -116,6 +117,8 @@ class Run(Base):
     constellation: Mapped[Constellation | None] = relationship()
     started_by: Mapped[User | None] = relationship()
     instance: Mapped[TeamInstance | None] = relationship()
+    # on a team instance: its upload to the master's portal (the outbox row; cloudsim.portal)
+    upload: Mapped[PortalUpload | None] = relationship(viewonly=True)
     artifacts: Mapped[list[Artifact]] = relationship(
         back_populates="run", cascade="all, delete-orphan"
     )

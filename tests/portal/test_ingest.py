@@ -33,7 +33,7 @@ from cloudsim.portal import outbox
 from cloudsim.portal.credentials import portal_endpoint
 from cloudsim.team_instances.client import call
 from provisioners.remote import pki
-from tests.conftest import csrf_token, log_in, make_user, running_app
+from tests.conftest import csrf_token, log_in, make_user, running_app, token_for
 from tests.portal.ingest_support import Portal, finished_run, start_master, sync_instance
 from tests.support.servers import free_port, wait_for
 from tests.support.workers import kill_worker, worker_process
@@ -119,6 +119,12 @@ def test_a_finished_run_reaches_the_master_through_a_real_worker(
     log_in(client, make_user(Role.OFFICER))
     page = client.get(f"/runs/{run.id}").get_data(as_text=True)
     assert "uploaded" in page and f"run {master_run_id} on the master" in page
+    member = token_for(make_user(Role.USER, run.team))
+    upload = client.get(f"/api/v1/runs/{run.id}", headers=member).json
+    assert (upload["upload"]["state"], upload["upload"]["portal_run_id"]) == (
+        "uploaded",
+        master_run_id,
+    )
     # sending the same run again adds nothing
     endpoint = portal_endpoint()
     assert endpoint is not None
@@ -311,6 +317,10 @@ def test_an_instance_sends_nothing_to_a_portal_with_another_certificate(
     row = db.session.scalar(select(PortalUpload).where(PortalUpload.run_id == run.id))
     assert row is not None and row.state == UploadState.PENDING
     assert row.error and "does not match the pinned one" in row.error
+    officer = token_for(make_user(Role.OFFICER))
+    shown = instance.test_client().get(f"/api/v1/runs/{run.id}", headers=officer).json["upload"]
+    assert shown["state"] == "pending" and "does not match the pinned one" in shown["error"]
+    assert shown["next_attempt_at"] and shown["portal_run_id"] is None
     assert _master_run(portal, run.id) is None
 
 
