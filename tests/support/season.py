@@ -299,8 +299,8 @@ def team_urls(app: Flask, team_id: int, endpoints: Iterable[str]) -> dict[str, s
     with app.test_request_context():
         for rule in app.url_map.iter_rules():
             if rule.endpoint in wanted and "GET" in (rule.methods or ()):
-                if "instance_id" in rule.arguments and "instance_id" not in ids:
-                    continue
+                if not rule.arguments <= ids.keys():
+                    continue  # e.g. instances' pages in a season without any, upload routes
                 values = {k: v for k, v in ids.items() if k in rule.arguments}
                 found[rule.endpoint] = url_for(rule.endpoint, **values)
     return found

@@ -61,6 +61,8 @@ def urls(app: Flask, team_a: Team) -> dict[tuple[str, str], str]:
     """Return (persona, endpoint) -> URL of every GET route each visitor may open."""
     gets = {endpoint for endpoint, method in MATRIX if method == "GET"}
     found = team_urls(app, team_a.id, gets)
+    opened = {e for e in gets for p in VISITORS if MATRIX[(e, "GET")][PERSONAS.index(p)] == 200}
+    assert opened <= found.keys(), f"no URL for {opened - found.keys()}: seed what they show"
     return {
         (persona, endpoint): url
         for endpoint, url in found.items()
