@@ -164,6 +164,11 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_PORTAL_RETRY_SECONDS": Setting(
         "5", "On a team instance: the first wait after a failed upload; doubles up to 600 s"
     ),
+    "CLOUDSIM_PORTAL_STAGING_HOURS": Setting(
+        "48",
+        "On a master: how long the part of a log whose upload stopped arriving is kept (a piece"
+        " arriving later starts that log again from 0)",
+    ),
     "CLOUDSIM_PORTAL_WINDOW_GRACE_SECONDS": Setting(
         "900",
         "On a master: how long after its task's window an uploaded run may have ended (its stop"
@@ -236,6 +241,7 @@ class Config:
     portal_upload_seconds: int
     portal_retry_seconds: int
     portal_window_grace_seconds: int
+    portal_staging_hours: int
     viewer_live_hz: int
     viewer_live_delay_ms: int
     viewer_poll_ms: int
@@ -361,6 +367,7 @@ class Config:
             portal_upload_seconds=positive("CLOUDSIM_PORTAL_UPLOAD_SECONDS"),
             portal_retry_seconds=positive("CLOUDSIM_PORTAL_RETRY_SECONDS"),
             portal_window_grace_seconds=number("CLOUDSIM_PORTAL_WINDOW_GRACE_SECONDS"),
+            portal_staging_hours=positive("CLOUDSIM_PORTAL_STAGING_HOURS"),
             viewer_live_hz=number("CLOUDSIM_VIEWER_LIVE_HZ"),
             viewer_live_delay_ms=number("CLOUDSIM_VIEWER_LIVE_DELAY_MS"),
             viewer_poll_ms=number("CLOUDSIM_VIEWER_POLL_MS"),

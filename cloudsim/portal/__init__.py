@@ -13,7 +13,7 @@ def init_app(app: Flask) -> None:
     """Register this feature's pages, API and periodic upload with the app."""
     from cloudsim.api import API_PREFIX, OWN_AUTH_PREFIXES, register_api
     from cloudsim.jobs.queue import schedule_task
-    from cloudsim.portal import ingest_api, ingest_views, outbox, views
+    from cloudsim.portal import ingest_api, ingest_views, outbox, staging, views
 
     app.register_blueprint(views.bp)
     app.register_blueprint(ingest_views.bp)
@@ -22,6 +22,7 @@ def init_app(app: Flask) -> None:
     register_api(app, ingest_api.blp)
     every = app.config["CLOUDSIM"].portal_upload_seconds
     schedule_task(app, outbox.TASK, timedelta(seconds=every))
+    schedule_task(app, staging.TASK, staging.EVERY)
 
 
 def init_cli(cli: click.Group) -> None:

@@ -27,6 +27,7 @@ from cloudsim.config import Config
 from cloudsim.errors import CloudSimError, Conflict, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Artifact, Run, RunState, ScoreEvent, Task, TeamInstance, utcnow
+from cloudsim.portal import staging
 
 TASK_KEY = re.compile(r"^m([0-9]{1,12})$")  # the master's task, as its instances name it
 PIECE = 1024 * 1024
@@ -201,8 +202,7 @@ def _declared(run: Run, filename: str) -> dict[str, Any]:
 
 
 def _staged(run: Run, filename: str) -> Path:
-    config: Config = current_app.config["CLOUDSIM"]
-    return config.instance_dir / "portal" / "staging" / str(run.id) / f"{filename}.part"
+    return staging.part_path(current_app.config["CLOUDSIM"], run.id, filename)
 
 
 def log_status(run: Run, filename: str) -> dict[str, Any]:
@@ -235,12 +235,13 @@ def receive_chunk(
     if artifact_for(run, filename) is not None:
         return log_status(run, filename)  # a repeated last piece: stored already
     part = _staged(run, filename)
-    part.parent.mkdir(parents=True, exist_ok=True)
-    with part.open("ab") as staged:
+    with staging.open_part(part) as staged:
         try:
             fcntl.flock(staged, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             raise Conflict(f"{filename}: another piece is being received") from None
+        if staging.removed_meanwhile(staged):
+            raise OffsetMismatch(filename, 0)  # cleaned as abandoned: the log starts again
         received = staged.seek(0, 2)
         if offset != received:
             raise OffsetMismatch(filename, received)
@@ -288,6 +289,7 @@ def _store(run: Run, log: dict[str, Any], part: Path) -> None:
     db.session.flush()
     if all(artifact_for(run, other["filename"]) for other in run.upload_manifest or ()):
         run.logs_complete_at = utcnow()
+        staging.discard_run(current_app.config["CLOUDSIM"], run.id)  # its folder, now empty
 
 
 def complete(instance: TeamInstance, remote_id: int) -> Run:

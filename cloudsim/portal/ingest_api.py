@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-from flask import g, request
+from flask import current_app, g, request
 from flask.typing import ResponseReturnValue
 from flask.views import MethodView
 
@@ -16,7 +16,7 @@ from cloudsim.competition.api import RunSchema
 from cloudsim.errors import NotFound
 from cloudsim.extensions import db
 from cloudsim.models import TeamInstance
-from cloudsim.portal import ingest, review
+from cloudsim.portal import ingest, review, staging
 from cloudsim.portal.credentials import instance_for_token
 from cloudsim.portal.schemas import (
     LogStatusSchema,
@@ -62,6 +62,9 @@ def _recording(remote_id: int, action: Callable[[], T]) -> T:
         db.session.rollback()
         review.record_refusal(_instance(), remote_id, refused)
         db.session.commit()
+        if refused.run_id is not None and not isinstance(refused, ingest.ChecksumMismatch):
+            # refused for good (the instance stops sending): the run's parts of logs go now
+            staging.discard_run(current_app.config["CLOUDSIM"], refused.run_id)
         raise
 
 
