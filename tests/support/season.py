@@ -288,8 +288,6 @@ def team_urls(app: Flask, team_id: int, endpoints: Iterable[str]) -> dict[str, s
         "run_id": run.id,
         "artifact_id": run.artifacts[0].id,
         "name": "vrc_task_1",  # a world
-        "remote_run_id": run.id,  # the portal's ingest routes (an instance's upload token)
-        "filename": run.artifacts[0].filename,
     }
     instance = db.session.scalar(select(TeamInstance.id).order_by(TeamInstance.id.desc()))
     if instance is not None:  # a season with team instances (their pages need one)
