@@ -1,17 +1,14 @@
-"""A master launches a team's constellation through the team's instance (the instance
-provisions it on the `servers` provider, bare local hosts standing in for the servers), follows
-it, then is stopped while the team runs a task on its instance, and catches up once restarted.
-
-The kind is `simple` (one server), not `vrc` (four): what goes through the instance is the
-same (settings handed over, launch, progress followed); a vrc would add three servers and the
-router's software to install over SSH, minutes of the suite's budget for nothing more tested.
-"""
+"""A master launches a team's `vrc` constellation through the team's instance (the instance
+provisions it on the `servers` provider, four bare local hosts standing in for the team's
+servers), follows it, then is stopped while the team runs a task on its instance, and catches
+up once restarted."""
 
 from __future__ import annotations
 
 import json
 import shlex
 import subprocess
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, cast
 
@@ -45,18 +42,23 @@ from tests.team_instances.test_local_instances import (
 pytestmark = [pytest.mark.hosts, pytest.mark.browser]
 
 
-def _server(config: Config, login: KeyPair) -> tuple[Node, str]:
-    """Make a bare machine (its own LAN and a public address) for the servers provider."""
+def _servers(config: Config, login: KeyPair) -> tuple[list[Node], str]:
+    """Make four bare machines on one LAN, each with a public address at which the instance
+    reaches it (the servers provider's inventory); return them and the LAN's CIDR."""
     driver = open_provider("local", config).driver
     lan = driver.ex_create_network("bare")
-    node = driver.create_node(
-        name="bare-1",
-        auth=NodeAuthSSHKey(login.public_line),
-        ex_network=lan,
-        ex_public=True,
-        ex_init="systemd",
-    )
-    return node, lan.cidr
+
+    def make(number: int) -> Node:
+        return driver.create_node(
+            name=f"bare-{number}",
+            auth=NodeAuthSSHKey(login.public_line),
+            ex_network=lan,
+            ex_public=True,
+            ex_init="systemd",
+        )
+
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        return list(pool.map(make, range(1, 5))), lan.cidr
 
 
 def _launch(instance: TeamInstance, config: Config) -> dict[str, Any] | None:
@@ -78,7 +80,7 @@ def test_a_constellation_through_an_instance_and_the_master_stopped(
     team = create_team(SYSTEM, "Team A")
     member, admin = make_user(Role.USER, team), make_user(Role.ADMIN)
     login = make_key_pair("inventory")
-    server, cidr = _server(config, login)
+    servers, cidr = _servers(config, login)
     # the master's worker: a process of its own, stopped (by its PID) and restarted below
     master = worker_process(config, pytestconfig.rootpath)
     try:
@@ -90,30 +92,35 @@ def test_a_constellation_through_an_instance_and_the_master_stopped(
         wait_for(lambda: ready(config), 120, "the instance ready")
 
         # As the README says: the servers' inventory kept for the instance, then the launch.
-        # First an inventory whose server has no public address (`simple` needs one): the
-        # instance's launch fails and the master says why; fixed, the next launch resumes it.
+        # First an inventory of three private servers (the router needs a public one): the
+        # instance's launch fails and the master says why; with the fourth, public, server
+        # added, the next launch resumes it.
         client = constellations_app.test_client()
-        entry = {
-            "name": "bare-1",
-            "address": server.public_ips[0],
-            "private_ip": server.private_ips[0],
-            "network": "bare",
-            "cidr": cidr,
-            "private_key": login.private,
-        }
-        _launch_through(client, admin, instance, entry)
+        entries = [
+            {
+                "name": server.name,
+                "address": server.public_ips[0],
+                "private_ip": server.private_ips[0],
+                "network": "bare",
+                "cidr": cidr,
+                "private_key": login.private,
+            }
+            for server in servers
+        ]
+        _launch_through(client, admin, instance, entries[1:])
         failed = cast(dict[str, Any], wait_for(lambda: _launch(instance, config), 300, "fail"))
         assert failed["state"] == "error" and "public" in failed["error"], failed
-        _launch_through(client, admin, instance, {**entry, "public_ip": server.public_ips[0]})
+        # the router's public server; the others are reached through it once claimed
+        router = {**entries[0], "public_ip": entries[0]["address"]}
+        _launch_through(client, admin, instance, [router, *entries[1:]])
         launch = cast(dict[str, Any], wait_for(lambda: _launch(instance, config), 900, "launch"))
         assert launch["state"] == "ready", _remote_log(instance, config)
         assert (
             launch["progress"] == 100 and launch["constellation_id"] == failed["constellation_id"]
         )
+        job = on_instance(instance, config, f"/jobs/{launch['job_id']}")
         for secret in (login.private, instance_admin_token(instance.constellation)):
-            assert secret not in json.dumps(
-                on_instance(instance, config, f"/jobs/{launch['job_id']}")
-            )
+            assert secret not in json.dumps(job)
         _catch_up(
             config,
             client,
@@ -121,7 +128,7 @@ def test_a_constellation_through_an_instance_and_the_master_stopped(
             member,
             instance,
             master,
-            server,
+            servers,
             login,
             tmp_path,
             pytestconfig.rootpath,
@@ -131,17 +138,19 @@ def test_a_constellation_through_an_instance_and_the_master_stopped(
             kill_worker(master)
 
 
-def _launch_through(client: Any, admin: Any, instance: TeamInstance, entry: dict[str, Any]) -> None:
+def _launch_through(
+    client: Any, admin: Any, instance: TeamInstance, inventory: list[dict[str, Any]]
+) -> None:
     """Keep an inventory for the instance and launch through it, with the documented bodies."""
     answer = client.put(
         f"/api/v1/team-instances/{instance.id}/provider",
-        json={"provider": "servers", "settings": {"inventory": [entry]}},
+        json={"provider": "servers", "settings": {"inventory": inventory}},
         headers=token_for(admin),
     )
     assert answer.status_code == 200, answer.get_json()
     answer = client.post(
         "/api/v1/team-instances/launch",
-        json={"kind": "simple", "provider": "servers"},
+        json={"kind": "vrc", "provider": "servers"},
         headers=token_for(admin),
     )
     assert answer.status_code == 200, answer.get_json()
@@ -149,8 +158,23 @@ def _launch_through(client: Any, admin: Any, instance: TeamInstance, entry: dict
     assert (row["instance"], row["team"], row["state"]) == ("team-a", "Team A", "launching")
     handed = finished(row["job_id"], 120)
     assert handed.state == JobState.SUCCEEDED, f"{handed.error}\n{handed.log}"
-    assert entry["private_key"] not in handed.log
+    assert inventory[0]["private_key"] not in handed.log
     assert instance_admin_token(instance.constellation) not in handed.log
+
+
+def launch_id(instance: TeamInstance) -> int:
+    """Return the id of the constellation launched through the instance, on the instance."""
+    return int((instance.launch or {})["constellation_id"])
+
+
+def _run_log(instance: TeamInstance, config: Config, run: dict[str, Any]) -> str:
+    """Return why a run on the instance did not start: its error and its jobs' logs."""
+    jobs = on_instance(instance, config, "/jobs?page_size=20")
+    starts = [j for j in jobs if j["kind"].startswith("run.")]
+    logs = [on_instance(instance, config, f"/jobs/{j['id']}") for j in starts[:3]]
+    return f"{run.get('error')}\n" + "\n".join(
+        f"{j['kind']} {j['state']} {j.get('error')}\n{j.get('log', '')[-3000:]}" for j in logs
+    )
 
 
 def _remote_log(instance: TeamInstance, config: Config) -> str:
@@ -169,7 +193,7 @@ def _catch_up(
     member: Any,
     instance: TeamInstance,
     master: subprocess.Popen[bytes],
-    server: Node,
+    servers: list[Node],
     login: KeyPair,
     tmp: Path,
     root: Path,
@@ -194,13 +218,18 @@ def _catch_up(
         base = log_in_instance(page, instance, member)
         page.goto(f"{base}/tasks")
         page.get_by_role("button", name="Start run").click()
-        expect(page.locator("#run-state")).to_have_text("running", timeout=180_000)
+        expect(page.locator("#run-state")).not_to_have_text("starting", timeout=180_000)
         run_id = int(page.url.rstrip("/").split("/")[-1])
-        # the team's code drives the robot (on the practice server: `simple` has no fc1)
-        proxy = shlex.join(server.extra["ssh_proxy_command"])
+        started = on_instance(instance, config, f"/runs/{run_id}")
+        assert started["state"] == "running", _run_log(instance, config, started)
+        # the team's code drives the robot from fc1 (as root: the test owns the servers)
+        launched = on_instance(instance, config, f"/constellations/{launch_id(instance)}")
+        address = {m["name"]: m["private_ip"] for m in launched["machines"]}
+        fc1 = next(n for n in servers if n.private_ips[0] == address["fc1"])
+        proxy = shlex.join(fc1.extra["ssh_proxy_command"])
         controller = (
             "systemd-run --unit=example-controller --collect /opt/drcsim/bin/drcsim "
-            f"example-controller --server {server.private_ips[0]} --world vrc_task_2 --timeout 120"
+            f"example-controller --server {address['sim']} --world vrc_task_2 --timeout 120"
         )
         key = tmp / "login"
         key.write_text(login.private)
@@ -218,7 +247,7 @@ def _catch_up(
                 "UserKnownHostsFile=/dev/null",
                 "-o",
                 "LogLevel=ERROR",
-                f"root@{server.private_ips[0]}",
+                f"root@{fc1.private_ips[0]}",
                 controller,
             ],
             check=True,
@@ -259,6 +288,6 @@ def _catch_up(
         assert users[member.email] == "Renamed while the master was down"
         log_in(client, admin)
         page_text = client.get(f"/team-instances/{instance.id}").get_data(as_text=True)
-        assert "simple on servers" in page_text and ">ready<" in page_text
+        assert "vrc on servers" in page_text and ">ready<" in page_text
     finally:
         kill_worker(restarted)

@@ -22,7 +22,7 @@ from libcloud.compute.base import (
     NodeSize,
 )
 
-from provisioners.providers.base import CloudSimNodeDriver
+from provisioners.providers.base import BEHIND_PUBLIC_MACHINE, CloudSimNodeDriver
 from provisioners.providers.servers import remote
 from provisioners.providers.servers.claims import (
     check_network_name,
@@ -306,6 +306,16 @@ class ServersNodeDriver(CloudSimNodeDriver):
                 user=server.user,
                 port=server.port,
                 proxy_command=tuple(server.proxy_command),
+            )
+        if server.public_ip is None:
+            # A kind that seals its private machines (vrc: sim's SSH from the router only)
+            # is reached as a cloud's private machines are: through its public machine, at
+            # the LAN address; the address is what the claim used, before the firewall.
+            return Route(
+                host=node.private_ips[0],
+                user=server.user,
+                port=server.port,
+                jump=BEHIND_PUBLIC_MACHINE,
             )
         return Route(host=server.address, user=server.user, port=server.port)
 
