@@ -1,5 +1,5 @@
 """Pages of the portal's integrity side: refused uploads (officers), an officer's review of a
-run, and what the run page says of a run's upload (on an instance) or origin (on a master)."""
+run, and the review form on the run page."""
 
 from __future__ import annotations
 
@@ -7,13 +7,12 @@ from flask import Blueprint, flash, redirect, render_template, request, url_for
 from flask.typing import ResponseReturnValue
 from flask_login import current_user, login_required
 from flask_wtf import FlaskForm
-from sqlalchemy import select
 from wtforms import BooleanField, TextAreaField
 from wtforms.validators import Length, Optional
 
 from cloudsim.errors import InvalidInput
 from cloudsim.extensions import db
-from cloudsim.models import PortalUpload, Run
+from cloudsim.models import Run
 from cloudsim.portal import review
 
 bp = Blueprint("portal_ingest", __name__)
@@ -26,12 +25,6 @@ class ReviewForm(FlaskForm):
     note = TextAreaField("Note", validators=[Optional(), Length(max=review.MAX_NOTE)])
     invalidated = BooleanField("Invalidated (does not count in the ranking)")
     reason = TextAreaField("Why invalidated", validators=[Optional(), Length(max=review.MAX_NOTE)])
-
-
-@bp.app_template_global()
-def portal_upload(run: Run) -> PortalUpload | None:
-    """Return the run's upload to the master (on a team instance), if it has one."""
-    return db.session.scalar(select(PortalUpload).where(PortalUpload.run_id == run.id))
 
 
 @bp.app_template_global()
