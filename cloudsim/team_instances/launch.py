@@ -159,8 +159,8 @@ def launch(
         if why is not None:
             summary.append(Outcome(instance.id, instance.name, _team(instance), "failed", why))
             continue
-        job = enqueue(LAUNCH_JOB, actor, LaunchJob(instance.id, kind, provider_name))
-        job.team_id = instance.team_id
+        payload = LaunchJob(instance.id, kind, provider_name)
+        job = enqueue(LAUNCH_JOB, actor, payload, team_id=instance.team_id)
         instance.launch = {"kind": kind, "provider": provider_name, "state": "starting"}
         record(
             "team_instance.launch",
