@@ -22,6 +22,7 @@ from provisioners.providers.local import host, layers, netns
 from provisioners.providers.local.addresses import (
     check_name,
     check_prefix,
+    count_free_subnets,
     parse_address,
     parse_subnet,
 )
@@ -204,8 +205,7 @@ class LocalNodeDriver(CloudSimNodeDriver):
             if not record.public
         ]
         taken.append(self._networks.public_subnet)
-        candidates = self._networks.subnet_pool.subnets(new_prefix=SUBNET_PREFIX)
-        return sum(1 for c in candidates if not any(c.overlaps(t) for t in taken))
+        return count_free_subnets(self._networks.subnet_pool, SUBNET_PREFIX, taken)
 
     @requires_root
     def ex_image_layer(self, name: str, command: str) -> bool | None:

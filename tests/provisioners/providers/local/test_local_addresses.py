@@ -12,6 +12,7 @@ from provisioners.providers.local.addresses import (
     check_name,
     check_prefix,
     check_subnet_free,
+    count_free_subnets,
     gateway_address,
     interface_cidr,
     parse_address,
@@ -148,3 +149,19 @@ def test_prefixes_are_short_words(prefix: str, valid: bool) -> None:
     else:
         with pytest.raises(LocalProviderError, match="invalid prefix"):
             check_prefix(prefix)
+
+
+def test_free_subnets_are_counted_as_testing_each_candidate_would() -> None:
+    pool = IPv4Network("10.211.0.0/20")
+    cases = [
+        [],
+        [IPv4Network("10.211.3.0/24")],
+        [IPv4Network("10.211.3.0/28"), IPv4Network("10.211.3.64/26")],  # one /24 twice
+        [IPv4Network("10.211.4.0/22"), IPv4Network("10.211.5.0/24")],  # a bigger one
+        [IPv4Network("10.210.0.0/15")],  # the whole pool and beyond
+        [IPv4Network("10.211.15.0/24"), IPv4Network("10.212.0.0/24")],  # last one, outside
+    ]
+    for taken in cases:
+        candidates = pool.subnets(new_prefix=24)
+        expected = sum(1 for c in candidates if not any(c.overlaps(t) for t in taken))
+        assert count_free_subnets(pool, 24, taken) == expected, taken
