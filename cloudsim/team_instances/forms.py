@@ -2,13 +2,28 @@
 
 from __future__ import annotations
 
-from flask_wtf import FlaskForm
-from wtforms import IntegerField, SelectChoice, SelectField, StringField
-from wtforms.validators import DataRequired, Length, NumberRange
+from typing import Any
 
+import yaml
+from flask_wtf import FlaskForm
+from flask_wtf.file import FileField
+from werkzeug.datastructures import FileStorage
+from wtforms import (
+    IntegerField,
+    PasswordField,
+    SelectChoice,
+    SelectField,
+    StringField,
+    TextAreaField,
+)
+from wtforms.validators import DataRequired, Length, NumberRange, Optional
+
+from cloudsim.errors import InvalidInput
 from cloudsim.models import Team
 from cloudsim.providers.service import PROVIDERS
 from constellations.definition import available_kinds
+
+MAX_INVENTORY_BYTES = 1 << 20  # a few hundred servers with their keys
 
 
 def _team_choices(teams: list[Team], empty: str) -> list[SelectChoice]:
@@ -56,3 +71,64 @@ class LaunchThroughForm(FlaskForm):
         self.kind.choices = [SelectChoice(k) for k in available_kinds() if k != "cloudsim"]
         self.provider.choices = [SelectChoice(p) for p in PROVIDERS]
         return self
+
+
+class ProviderSettingsForm(FlaskForm):
+    """The provider settings an instance is handed at launch: for `servers` an inventory (file
+    or pasted YAML), for `ec2` the fields `cloudsim provider configure ec2` takes."""
+
+    provider = SelectField("Provider", default="servers")
+    inventory_file = FileField("servers: inventory file (YAML)")
+    inventory_text = TextAreaField("…or the inventory itself", validators=[Length(max=1 << 20)])
+    region = StringField("ec2: region", validators=[Optional(), Length(max=64)])
+    access_key = StringField("ec2: access key id", validators=[Optional(), Length(max=128)])
+    secret_key = PasswordField("ec2: secret access key", validators=[Optional(), Length(max=256)])
+    image = StringField("ec2: machine image (AMI)", validators=[Optional(), Length(max=128)])
+    sizes = TextAreaField(
+        "ec2: instance type per logical size, one LOGICAL=TYPE a line",
+        validators=[Optional(), Length(max=4096)],
+    )
+    endpoint = StringField(
+        "ec2: API URL instead of AWS's", validators=[Optional(), Length(max=256)]
+    )
+
+    def offer(self) -> ProviderSettingsForm:
+        """Fill the choices: the providers that take settings."""
+        self.provider.choices = [SelectChoice(p) for p in PROVIDERS if p != "local"]
+        return self
+
+    def settings(self) -> dict[str, Any]:
+        """Return the settings as the API takes them (checked by the service, not here)."""
+        if self.provider.data == "ec2":
+            return self._ec2()
+        upload = self.inventory_file.data
+        if isinstance(upload, FileStorage) and upload.filename:
+            text = upload.read(MAX_INVENTORY_BYTES + 1).decode("utf-8", errors="replace")
+        else:
+            text = self.inventory_text.data or ""
+        if not text.strip():
+            raise InvalidInput("choose an inventory file or paste the inventory")
+        try:
+            return {"inventory": yaml.safe_load(text)}
+        except yaml.YAMLError as exc:
+            raise InvalidInput(f"servers inventory: not YAML: {exc}") from None
+
+    def _ec2(self) -> dict[str, Any]:
+        sizes = {}
+        for line in (self.sizes.data or "").splitlines():
+            if not line.strip():
+                continue
+            logical, _, instance_type = line.strip().partition("=")
+            if not logical or not instance_type:
+                raise InvalidInput(f"{line.strip()!r} is not LOGICAL=TYPE")
+            sizes[logical] = instance_type
+        settings: dict[str, Any] = {
+            "access_key": self.access_key.data or "",
+            "secret_key": self.secret_key.data or "",
+            "region": self.region.data or "",
+            "image": self.image.data or "",
+            "sizes": sizes,
+        }
+        if self.endpoint.data:
+            settings["endpoint"] = self.endpoint.data
+        return settings

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from datetime import datetime
 from typing import Any
 
 from flask import current_app
@@ -76,6 +77,7 @@ def set_provider_settings(
         )
         db.session.add(secret)
     secret.value = json.dumps(settings)
+    secret.created_at = utcnow()  # when these settings were set, as the instance's page says
     db.session.flush()
     # which provider, never what: the settings hold credentials
     record(
@@ -87,6 +89,18 @@ def set_provider_settings(
         provider=name,
     )
     return instance
+
+
+def kept_settings(instance_id: int) -> dict[str, datetime]:
+    """Return which providers' settings are kept for an instance, and when each was set."""
+    rows = db.session.execute(
+        select(Secret.name, Secret.created_at).where(
+            Secret.owner_type == OWNER,
+            Secret.owner_id == instance_id,
+            Secret.name.startswith(SETTINGS_PREFIX),
+        )
+    )
+    return {name.removeprefix(SETTINGS_PREFIX): when for name, when in rows}
 
 
 @dataclass(frozen=True)
@@ -125,7 +139,10 @@ def _refusal(instance: TeamInstance, name: str) -> str | None:
             f": {instance.error}" if instance.error else ""
         )
     if provider(name).configurable and _stored(instance.id, name) is None:
-        return f"no {name} settings for it: `cloudsim instance provider {instance.name} {name} ...`"
+        return (
+            f"no {name} settings for it: set them on its page or "
+            f"`cloudsim instance provider {instance.name} {name} ...`"
+        )
     return None
 
 

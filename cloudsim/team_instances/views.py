@@ -13,7 +13,12 @@ from cloudsim.extensions import db
 from cloudsim.models import Role
 from cloudsim.people.service import visible_teams
 from cloudsim.team_instances import launch, service
-from cloudsim.team_instances.forms import AssignForm, DeployForm, LaunchThroughForm
+from cloudsim.team_instances.forms import (
+    AssignForm,
+    DeployForm,
+    LaunchThroughForm,
+    ProviderSettingsForm,
+)
 
 bp = Blueprint("team_instances", __name__)
 
@@ -82,10 +87,20 @@ def launch_all() -> ResponseReturnValue:
     return redirect(url_for("team_instances.index"))
 
 
-def _show(instance_id: int, form: AssignForm, status: int = 200) -> ResponseReturnValue:
+def _show(
+    instance_id: int,
+    form: AssignForm,
+    status: int = 200,
+    settings: ProviderSettingsForm | None = None,
+) -> ResponseReturnValue:
     instance = service.get_instance(current_user, instance_id)
     return render_template(
-        "team_instances/show.html", instance=instance, assign=form, confirm=ConfirmForm()
+        "team_instances/show.html",
+        instance=instance,
+        assign=form,
+        confirm=ConfirmForm(),
+        settings=settings or ProviderSettingsForm().offer(),
+        kept=launch.kept_settings(instance.id),
     ), status
 
 
@@ -93,6 +108,26 @@ def _show(instance_id: int, form: AssignForm, status: int = 200) -> ResponseRetu
 @role_required(Role.ADMIN)
 def show(instance_id: int) -> ResponseReturnValue:
     return _show(instance_id, AssignForm().offer(visible_teams(current_user)))
+
+
+@bp.route("/team-instances/<int:instance_id>/provider", methods=["POST"])
+@role_required(Role.ADMIN)
+def provider_settings(instance_id: int) -> ResponseReturnValue:
+    form = ProviderSettingsForm().offer()
+    assign = AssignForm().offer(visible_teams(current_user))
+    if not form.validate_on_submit():
+        return _show(instance_id, assign, 400, form)
+    try:
+        # the service the API and CLI call: same checks, same audit line
+        instance = launch.set_provider_settings(
+            current_user, instance_id, form.provider.data, form.settings()
+        )
+    except CloudSimError as exc:
+        db.session.rollback()
+        form.form_errors.append(str(exc))
+        return _show(instance_id, assign, exc.status, form)
+    flash(f"{instance.name}: {form.provider.data} settings kept (encrypted).", "info")
+    return redirect(url_for("team_instances.show", instance_id=instance_id))
 
 
 @bp.route("/team-instances/<int:instance_id>/assign", methods=["POST"])

@@ -4,6 +4,7 @@ instance is reached here (tests/team_instances/test_local_launch.py launches for
 
 from __future__ import annotations
 
+import io
 import json
 from collections.abc import Callable
 from pathlib import Path
@@ -135,6 +136,62 @@ def test_api_and_page_as_the_readme_shows_them(app: Flask, team_a: Team) -> None
     assert "team-a (Team A): launching" in answer.get_data(as_text=True)
     refused = client.post("/team-instances/launch", data={**form, "kind": "nonsense"})
     assert refused.status_code == 400
+
+
+def test_the_instance_page_form_keeps_settings_and_refuses_a_bad_inventory(
+    app: Flask, team_a: Team
+) -> None:
+    admin = make_user(Role.ADMIN)
+    ours = _ready(team_a, "team-a")
+    db.session.commit()
+    refused = launch.launch(SYSTEM, "vrc", "servers", [ours.id])
+    assert "no servers settings" in (refused[0].why or "")
+    client = app.test_client()
+    log_in(client, admin)
+    url = f"/team-instances/{ours.id}"
+    page = client.get(url).get_data(as_text=True)
+    assert "none kept" in page and "Keep settings" in page
+    form = {"csrf_token": csrf_token(page), "provider": "servers"}
+
+    # a bad inventory, pasted: the API's error, nothing kept
+    bad = client.post(url + "/provider", data={**form, "inventory_text": "- name: x\n"})
+    assert bad.status_code == 400 and "servers inventory" in bad.get_data(as_text=True)
+    not_yaml = client.post(url + "/provider", data={**form, "inventory_text": "a: [b"})
+    assert not_yaml.status_code == 400 and "not YAML" in not_yaml.get_data(as_text=True)
+    assert launch.kept_settings(ours.id) == {}
+    # the form without its CSRF token: refused too
+    assert client.post(url + "/provider", data={"provider": "servers"}).status_code == 400
+
+    # a valid inventory, uploaded as a file
+    upload = (io.BytesIO(yaml.safe_dump(inventory()).encode()), "servers.yaml")
+    answer = client.post(
+        url + "/provider",
+        data={**form, "inventory_file": upload},
+        content_type="multipart/form-data",
+        follow_redirects=True,
+    )
+    shown = answer.get_data(as_text=True)
+    assert answer.status_code == 200 and "servers settings kept (encrypted)" in shown
+    assert "servers: kept (encrypted), set 20" in shown
+    assert KEY.private[40:80] not in shown and "198.18.0.7" not in shown
+    stored = db.session.execute(text("SELECT value FROM secrets")).scalars().all()
+    assert stored and not any("PRIVATE KEY" in v or "srv-1" in v for v in stored)
+    assert set(launch.kept_settings(ours.id)) == {"servers"}
+    event = db.session.scalars(
+        select(AuditEvent).where(AuditEvent.action == "team_instance.provider")
+    ).one()
+    assert event.details.get("provider") == "servers"
+    (launched,) = launch.launch(SYSTEM, "vrc", "servers", [ours.id])
+    assert launched.state == "launching" and launched.job_id
+
+    # ec2: the fields `cloudsim provider configure ec2` takes
+    ec2 = {**form, "provider": "ec2", "region": "us-east-1", "access_key": "AKIA", "image": "ami-1"}
+    missing = client.post(url + "/provider", data=ec2)
+    assert missing.status_code == 400 and "ec2 needs secret_key" in missing.get_data(as_text=True)
+    kept = client.post(url + "/provider", data={**ec2, "secret_key": "s3cr3t", "sizes": "gpu=g4"})
+    assert kept.status_code == 302 and set(launch.kept_settings(ours.id)) == {"servers", "ec2"}
+    page = client.get(url).get_data(as_text=True)
+    assert "ec2: kept (encrypted)" in page and "s3cr3t" not in page
 
 
 def test_an_instance_keeps_provider_settings_its_master_hands_it(app: Flask) -> None:

@@ -166,6 +166,7 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("team_instances.show", "GET"): (LOGIN, 403, 403, 403, 200),
     ("team_instances.assign", "POST"): (LOGIN, 403, 403, 403, 400),  # no team chosen
     ("team_instances.terminate", "POST"): (LOGIN, 403, 403, 403, 302),
+    ("team_instances.provider_settings", "POST"): (LOGIN, 403, 403, 403, 400),  # no inventory
     ("api_team_instances.TeamInstances", "GET"): (401, 403, 403, 403, 200),
     ("api_team_instances.TeamInstances", "POST"): (401, 403, 403, 403, 202),
     ("api_team_instances.TeamInstanceById", "GET"): (401, 403, 403, 403, 200),
