@@ -11,8 +11,13 @@ import yaml
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, emit, reports_errors
-from cloudsim.errors import CloudSimError
-from cloudsim.providers.service import PROVIDERS, configure_provider, provider_settings
+from cloudsim.errors import CloudSimError, InvalidInput
+from cloudsim.providers.service import (
+    PROVIDERS,
+    configure_provider,
+    ec2_settings,
+    provider_settings,
+)
 
 
 @click.group()
@@ -54,22 +59,18 @@ def configure_ec2(
 ) -> None:
     """Amazon EC2 (or an EC2-compatible API): credentials, region, image, instance types."""
     secret = sys.stdin.readline().strip()
-    size_map = {}
-    for item in sizes:
-        logical, _, instance_type = item.partition("=")
-        if not logical or not instance_type:
-            raise click.BadParameter(f"{item!r} is not LOGICAL=TYPE", param_hint="--size")
-        size_map[logical] = instance_type
+    try:
+        settings = ec2_settings(
+            access_key=access_key,
+            secret_key=secret,
+            region=region,
+            image=image,
+            sizes=sizes,
+            endpoint=endpoint,
+        )
+    except InvalidInput as exc:
+        raise click.BadParameter(str(exc), param_hint="--size") from None
     with app_context():
-        settings = {
-            "access_key": access_key,
-            "secret_key": secret,
-            "region": region,
-            "image": image,
-            "sizes": size_map,
-        }
-        if endpoint:
-            settings["endpoint"] = endpoint
         configure_provider("ec2", settings)
         record(
             "provider.configure",

@@ -8,6 +8,7 @@ encrypted in the database, set by an admin with `cloudsim provider configure`.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -99,6 +100,36 @@ def provider_settings(name: str) -> dict[str, Any]:
             f"`cloudsim provider configure {name} ...`"
         )
     return cast(dict[str, Any], json.loads(secret.value))
+
+
+def ec2_settings(
+    *,
+    access_key: str,
+    secret_key: str,
+    region: str,
+    image: str,
+    sizes: Iterable[str],
+    endpoint: str | None = None,
+) -> dict[str, Any]:
+    """Return ec2's settings from its fields, sizes as LOGICAL=TYPE items (blank ones skipped)."""
+    size_map = {}
+    for item in (i.strip() for i in sizes):
+        if not item:
+            continue
+        logical, _, instance_type = item.partition("=")
+        if not logical or not instance_type:
+            raise InvalidInput(f"{item!r} is not LOGICAL=TYPE")
+        size_map[logical] = instance_type
+    settings: dict[str, Any] = {
+        "access_key": access_key,
+        "secret_key": secret_key,
+        "region": region,
+        "image": image,
+        "sizes": size_map,
+    }
+    if endpoint:
+        settings["endpoint"] = endpoint
+    return settings
 
 
 def configure_provider(name: str, settings: dict[str, Any]) -> None:

@@ -20,7 +20,7 @@ from wtforms.validators import DataRequired, Length, NumberRange, Optional
 
 from cloudsim.errors import InvalidInput
 from cloudsim.models import Team
-from cloudsim.providers.service import PROVIDERS
+from cloudsim.providers.service import PROVIDERS, ec2_settings
 from constellations.definition import available_kinds
 
 MAX_INVENTORY_BYTES = 1 << 20  # a few hundred servers with their keys
@@ -114,21 +114,11 @@ class ProviderSettingsForm(FlaskForm):
             raise InvalidInput(f"servers inventory: not YAML: {exc}") from None
 
     def _ec2(self) -> dict[str, Any]:
-        sizes = {}
-        for line in (self.sizes.data or "").splitlines():
-            if not line.strip():
-                continue
-            logical, _, instance_type = line.strip().partition("=")
-            if not logical or not instance_type:
-                raise InvalidInput(f"{line.strip()!r} is not LOGICAL=TYPE")
-            sizes[logical] = instance_type
-        settings: dict[str, Any] = {
-            "access_key": self.access_key.data or "",
-            "secret_key": self.secret_key.data or "",
-            "region": self.region.data or "",
-            "image": self.image.data or "",
-            "sizes": sizes,
-        }
-        if self.endpoint.data:
-            settings["endpoint"] = self.endpoint.data
-        return settings
+        return ec2_settings(
+            access_key=self.access_key.data or "",
+            secret_key=self.secret_key.data or "",
+            region=self.region.data or "",
+            image=self.image.data or "",
+            sizes=(self.sizes.data or "").splitlines(),
+            endpoint=self.endpoint.data,
+        )

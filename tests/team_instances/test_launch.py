@@ -188,7 +188,11 @@ def test_the_instance_page_form_keeps_settings_and_refuses_a_bad_inventory(
     ec2 = {**form, "provider": "ec2", "region": "us-east-1", "access_key": "AKIA", "image": "ami-1"}
     missing = client.post(url + "/provider", data=ec2)
     assert missing.status_code == 400 and "ec2 needs secret_key" in missing.get_data(as_text=True)
-    kept = client.post(url + "/provider", data={**ec2, "secret_key": "s3cr3t", "sizes": "gpu=g4"})
+    ec2["secret_key"] = "s3cr3t"
+    bad = client.post(url + "/provider", data={**ec2, "sizes": "gpu=g4\ncpu"})
+    assert bad.status_code == 400 and "is not LOGICAL=TYPE" in bad.get_data(as_text=True)
+    assert set(launch.kept_settings(ours.id)) == {"servers"}
+    kept = client.post(url + "/provider", data={**ec2, "sizes": "gpu=g4\n\n"})
     assert kept.status_code == 302 and set(launch.kept_settings(ours.id)) == {"servers", "ec2"}
     page = client.get(url).get_data(as_text=True)
     assert "ec2: kept (encrypted)" in page and "s3cr3t" not in page
