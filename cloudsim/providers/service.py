@@ -132,8 +132,8 @@ def ec2_settings(
     return settings
 
 
-def configure_provider(name: str, settings: dict[str, Any]) -> None:
-    """Store (encrypted) a provider's settings, replacing earlier ones; refuse bad ones."""
+def check_settings(name: str, settings: dict[str, Any]) -> None:
+    """Refuse (InvalidInput) settings the provider called name does not take."""
     spec = _spec(name)
     if not spec.configurable:
         configurable = ", ".join(p.name for p in REGISTRY.values() if p.configurable)
@@ -142,6 +142,11 @@ def configure_provider(name: str, settings: dict[str, Any]) -> None:
         spec.check(settings)
     except SettingsError as exc:
         raise InvalidInput(str(exc)) from None
+
+
+def configure_provider(name: str, settings: dict[str, Any]) -> None:
+    """Store (encrypted) a provider's settings, replacing earlier ones; refuse bad ones."""
+    check_settings(name, settings)
     secret = _stored(name)
     if secret is None:
         secret = Secret(

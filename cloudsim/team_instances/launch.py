@@ -25,10 +25,10 @@ from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, Payload, job_kind
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import InstanceState, Role, Secret, SecretKind, TeamInstance, utcnow
+from cloudsim.providers.service import check_settings
 from cloudsim.team_instances import service
 from cloudsim.team_instances.client import Endpoint, InstanceError, call
 from constellations.definition import DefinitionError, kind_data
-from provisioners.providers.errors import SettingsError
 from provisioners.providers.registry import PROVIDERS, provider
 
 LAUNCH_JOB = "team_instance.launch"
@@ -37,16 +37,6 @@ SETTINGS_PREFIX = "provider:"
 # what the instance's constellation is in, as the master last saw it: still going, or done
 GOING = {"starting", "pending", "launching"}
 FAILED = {"failed", "error", "terminating", "terminated"}
-
-
-def _spec_checked(name: str, settings: dict[str, Any]) -> None:
-    try:
-        spec = provider(name)
-        if not spec.configurable:
-            raise SettingsError(f"provider {name!r} takes no settings")
-        spec.check(settings)
-    except SettingsError as exc:
-        raise InvalidInput(str(exc)) from None
 
 
 def _stored(instance_id: int, name: str) -> Secret | None:
@@ -65,7 +55,7 @@ def set_provider_settings(
     """Keep (encrypted) the provider settings the master hands this instance at launch
     (admins); checked as `cloudsim provider configure` checks them."""
     instance = service.get_instance(actor, ref)
-    _spec_checked(name, settings)
+    check_settings(name, settings)  # as `cloudsim provider configure` checks them
     secret = _stored(instance.id, name)
     if secret is None:
         secret = Secret(
