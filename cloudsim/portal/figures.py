@@ -17,6 +17,9 @@ from cloudsim.competition.plots import AVERAGES, cumulative, moving_average
 from cloudsim.portal.results import ResultRow
 
 Cell = str | int | float
+# A text cell starting so is a formula to a spreadsheet: an end reason a team instance sent
+# or a team's name must not run as one on an officer's machine (OWASP "CSV injection").
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 
 
 @dataclass(frozen=True)
@@ -31,8 +34,13 @@ class Table:
         out = io.StringIO()
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(self.header)
-        writer.writerows(self.rows)
+        writer.writerows(tuple(_inert(cell) for cell in row) for row in self.rows)
         return out.getvalue()
+
+
+def _inert(cell: Cell) -> Cell:
+    """Return a text cell a spreadsheet shows as text (a leading quote), others as they are."""
+    return "'" + cell if isinstance(cell, str) and cell.startswith(FORMULA_START) else cell
 
 
 def bits_banked(rows: Iterable[ResultRow]) -> Table:
