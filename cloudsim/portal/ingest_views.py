@@ -3,17 +3,19 @@ run, and the review form on the run page."""
 
 from __future__ import annotations
 
-from flask import Blueprint, flash, redirect, render_template, request, url_for
+from flask import Blueprint, flash, redirect, render_template, url_for
 from flask.typing import ResponseReturnValue
 from flask_login import current_user, login_required
 from flask_wtf import FlaskForm
 from wtforms import BooleanField, TextAreaField
 from wtforms.validators import Length, Optional
 
+from cloudsim.auth.policy import role_required
 from cloudsim.errors import InvalidInput
 from cloudsim.extensions import db
-from cloudsim.models import Run
+from cloudsim.models import Role, Run
 from cloudsim.portal import review
+from cloudsim.web.inputs import query_int
 
 bp = Blueprint("portal_ingest", __name__)
 PAGE = 50
@@ -39,10 +41,14 @@ def review_form(run: Run) -> ReviewForm:
 
 
 @bp.route("/portal/refusals")
-@login_required
+@role_required(Role.OFFICER)
 def refusals() -> ResponseReturnValue:
-    query = review.refusals(current_user)
-    page = db.paginate(query, page=request.args.get("page", 1, type=int), per_page=PAGE)
+    page = db.paginate(
+        review.refusals(current_user),
+        page=query_int("page", 1, minimum=1),
+        per_page=PAGE,
+        error_out=False,
+    )
     return render_template("portal/refusals.html", page=page)
 
 

@@ -214,6 +214,7 @@ def test_results_the_instance_may_not_send_are_refused_and_shown_to_officers(
         log_in(page_client, make_user(Role.OFFICER))
     page = page_client.get("/portal/refusals").get_data(as_text=True)
     assert "serves &#39;Team A&#39; only" in page and "outside its task" in page
+    assert page_client.get("/portal/refusals?page=99999999999").status_code == 200  # past the end
     # the accepted record, twice: one run
     first = master.put(url, json=record, headers=token)
     second = master.put(url, json=record, headers=token)
