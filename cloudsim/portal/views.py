@@ -14,7 +14,7 @@ from sqlalchemy import select
 from cloudsim.auth.policy import require_team_access, role_required
 from cloudsim.competition import runs as run_service
 from cloudsim.competition.api import StandingSchema
-from cloudsim.competition.artifacts import LogStore
+from cloudsim.competition.artifacts import LogStore, artifact_for
 from cloudsim.errors import NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Artifact, Role, Team
@@ -129,7 +129,7 @@ def uplink_score_csv() -> ResponseReturnValue:
 @login_required
 def bandwidth_csv(run_id: int) -> ResponseReturnValue:
     run = run_service.get_run(current_user, run_id)
-    log = next((a for a in run.artifacts if a.filename == "bandwidth.jsonl"), None)
+    log = artifact_for(run, "bandwidth.jsonl")
     if log is None:
         raise NotFound(f"run {run_id} has no bandwidth log")
     store = LogStore(current_app.config["CLOUDSIM"])
