@@ -136,8 +136,10 @@ def test_a_run_and_its_log_uploaded_as_documented(master: Flask) -> None:
         "/api/v1/portal/ingest/runs/8", json=dict(record, uplink_bits=1), headers=uploader
     )
     assert other.status_code == 403 and "caps" in other.json["message"]
-    # a user's API token is no upload token
+    # a user's API token is no upload token, and an upload token opens nothing else
     assert client.put(base, json=record, headers=officer).status_code == 401
+    for url in ("/api/v1/runs", f"/api/v1/runs/{run['id']}", "/api/v1/portal/refusals"):
+        assert client.get(url, headers=uploader).status_code == 401, url
 
 
 def test_cli_as_the_readme_shows_it(
