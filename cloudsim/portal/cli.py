@@ -34,11 +34,9 @@ def certificate(out: Path, as_json: bool) -> None:
     with app_context():
         config = current_app.config["CLOUDSIM"]
         try:
-            cert, key = credentials.write_certificate(config, out)
+            cert, key, tls = credentials.write_certificate(config, out)
         except ValueError as exc:
             raise InvalidInput(str(exc)) from None
-        tls = credentials.portal_tls(config)
-        assert tls is not None
         data = {"cert": str(cert), "key": str(key), "host": tls.host, "sha256": tls.fingerprint}
         emit(data, as_json, f"{cert}\n{key}\nsha256 {tls.fingerprint} (for {tls.host})")
 

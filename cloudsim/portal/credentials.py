@@ -115,8 +115,9 @@ def portal_tls(config: Config) -> PortalTls | None:
     )
 
 
-def write_certificate(config: Config, folder: Path) -> tuple[Path, Path]:
-    """Write the portal's certificate and key (0600) for the web server; return their paths."""
+def write_certificate(config: Config, folder: Path) -> tuple[Path, Path, PortalTls]:
+    """Write the portal's certificate and key (0600) for the web server; return their paths
+    and the certificate."""
     tls = portal_tls(config)
     if tls is None:
         raise ValueError("set CLOUDSIM_PORTAL_URL first: the certificate names its host")
@@ -126,7 +127,7 @@ def write_certificate(config: Config, folder: Path) -> tuple[Path, Path]:
         path.touch(mode=0o600)
         path.chmod(0o600)
         path.write_text(text)
-    return cert, key
+    return cert, key, tls
 
 
 def portal_settings(instance: TeamInstance, config: Config) -> dict[str, Any] | None:
