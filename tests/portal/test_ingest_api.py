@@ -20,6 +20,7 @@ from cloudsim.models import Role, TeamInstance, utcnow
 from cloudsim.portal.credentials import upload_token
 from provisioners.remote import pki
 from tests.conftest import make_user, running_app, token_for
+from tests.portal.support import team_instance
 from tests.support.servers import RedisServer
 
 
@@ -140,6 +141,12 @@ def test_a_run_and_its_log_uploaded_as_documented(master: Flask) -> None:
     assert client.put(base, json=record, headers=officer).status_code == 401
     for url in ("/api/v1/runs", f"/api/v1/runs/{run['id']}", "/api/v1/portal/refusals"):
         assert client.get(url, headers=uploader).status_code == 401, url
+    # another team's instance does not learn that this upload exists, nor add to it
+    team_b = client.post("/api/v1/teams", json={"name": "Team B"}, headers=officer).json
+    stranger = {"Authorization": f"Bearer {upload_token(team_instance(team_b['id'], 'ti-b', ''))}"}
+    assert client.get(base, headers=stranger).status_code == 404
+    assert client.get(f"{base}/logs/score.jsonl", headers=stranger).status_code == 404
+    assert client.post(f"{base}/complete", headers=stranger).status_code == 404
 
 
 def test_cli_as_the_readme_shows_it(
