@@ -7,7 +7,6 @@ from typing import Any
 import yaml
 from flask_wtf import FlaskForm
 from flask_wtf.file import FileField
-from werkzeug.datastructures import FileStorage
 from wtforms import (
     IntegerField,
     PasswordField,
@@ -21,6 +20,7 @@ from wtforms.validators import DataRequired, Length, NumberRange, Optional
 from cloudsim.errors import InvalidInput
 from cloudsim.models import Team
 from cloudsim.providers.service import PROVIDERS, ec2_settings
+from cloudsim.web.inputs import uploaded_text
 from constellations.definition import available_kinds
 
 MAX_INVENTORY_BYTES = 1 << 20  # a few hundred servers with their keys
@@ -79,7 +79,9 @@ class ProviderSettingsForm(FlaskForm):
 
     provider = SelectField("Provider", default="servers")
     inventory_file = FileField("servers: inventory file (YAML)")
-    inventory_text = TextAreaField("…or the inventory itself", validators=[Length(max=1 << 20)])
+    inventory_text = TextAreaField(
+        "…or the inventory itself", validators=[Length(max=MAX_INVENTORY_BYTES)]
+    )
     region = StringField("ec2: region", validators=[Optional(), Length(max=64)])
     access_key = StringField("ec2: access key id", validators=[Optional(), Length(max=128)])
     secret_key = PasswordField("ec2: secret access key", validators=[Optional(), Length(max=256)])
@@ -101,11 +103,12 @@ class ProviderSettingsForm(FlaskForm):
         """Return the settings as the API takes them (checked by the service, not here)."""
         if self.provider.data == "ec2":
             return self._ec2()
-        upload = self.inventory_file.data
-        if isinstance(upload, FileStorage) and upload.filename:
-            text = upload.read(MAX_INVENTORY_BYTES + 1).decode("utf-8", errors="replace")
-        else:
-            text = self.inventory_text.data or ""
+        text = uploaded_text(
+            self.inventory_file.data,
+            self.inventory_text.data,
+            MAX_INVENTORY_BYTES,
+            "a servers inventory",
+        )
         if not text.strip():
             raise InvalidInput("choose an inventory file or paste the inventory")
         try:

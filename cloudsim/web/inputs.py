@@ -15,10 +15,13 @@ from flask import Flask, request
 from flask.json.provider import DefaultJSONProvider
 from flask.wrappers import Request
 from marshmallow import fields, validate
+from werkzeug.datastructures import FileStorage
 from werkzeug.exceptions import BadRequest
 from werkzeug.routing import IntegerConverter, Map
 from wtforms import IntegerField
 from wtforms.validators import NumberRange
+
+from cloudsim.errors import InvalidInput
 
 # Every id column is a 32-bit signed INTEGER in PostgreSQL; counters and bit caps are 64-bit.
 INT32_MAX = 2**31 - 1
@@ -184,6 +187,18 @@ def query_id(name: str) -> int | None:
     if (value := as_id(raw)) is None:
         raise BadRequest(f"{name} must be a positive whole number below {INT32_MAX + 1}")
     return value
+
+
+def uploaded_text(upload: object, pasted: str | None, limit: int, what: str) -> str:
+    """Return a form's uploaded file as text, else its pasted text; refuse either beyond limit
+    bytes (a file is never cut short at the limit and then parsed)."""
+    if isinstance(upload, FileStorage) and upload.filename:
+        raw = upload.read(limit + 1)
+    else:
+        raw = (pasted or "").encode()
+    if len(raw) > limit:
+        raise InvalidInput(f"{what} is at most {limit // 1024} KiB")
+    return raw.decode("utf-8", errors="replace")
 
 
 def init_inputs(app: Flask) -> None:

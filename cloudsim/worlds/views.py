@@ -9,13 +9,13 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 from flask_wtf import FlaskForm
 from flask_wtf.file import FileField
-from werkzeug.datastructures import FileStorage
 from wtforms import TextAreaField
 
 from cloudsim.auth.policy import role_required
 from cloudsim.errors import CloudSimError, InvalidInput
 from cloudsim.extensions import db
 from cloudsim.models import Role
+from cloudsim.web.inputs import uploaded_text
 from cloudsim.worlds import service
 
 bp = Blueprint("worlds", __name__)
@@ -29,11 +29,9 @@ class WorldUploadForm(FlaskForm):
 
     def document_text(self) -> str:
         """Return the uploaded or pasted text."""
-        upload = self.file.data
-        if isinstance(upload, FileStorage) and upload.filename:
-            raw = upload.read(service.MAX_DOCUMENT_BYTES + 1)
-            return raw.decode("utf-8", errors="replace")
-        return self.text.data or ""
+        return uploaded_text(
+            self.file.data, self.text.data, service.MAX_DOCUMENT_BYTES, "a world document"
+        )
 
 
 def _index(form: WorldUploadForm, status: int = 200) -> ResponseReturnValue:

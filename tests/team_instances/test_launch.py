@@ -14,6 +14,8 @@ import yaml
 from click.testing import Result
 from flask import Flask
 from sqlalchemy import select, text
+from werkzeug.datastructures import FileStorage, MultiDict
+from werkzeug.test import encode_multipart
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.errors import Forbidden, InvalidInput
@@ -21,6 +23,7 @@ from cloudsim.extensions import db
 from cloudsim.models import AuditEvent, InstanceState, Job, Role, Team, TeamInstance
 from cloudsim.providers.service import provider_settings
 from cloudsim.team_instances import launch, service
+from cloudsim.team_instances.forms import MAX_INVENTORY_BYTES
 from tests.competition.test_cli import run  # noqa: F401 (the fixture)
 from tests.conftest import csrf_token, log_in, make_user, token_for
 from tests.provisioners.providers.servers.keys import make_key_pair
@@ -158,6 +161,14 @@ def test_the_instance_page_form_keeps_settings_and_refuses_a_bad_inventory(
     assert bad.status_code == 400 and "servers inventory" in bad.get_data(as_text=True)
     not_yaml = client.post(url + "/provider", data={**form, "inventory_text": "a: [b"})
     assert not_yaml.status_code == 400 and "not YAML" in not_yaml.get_data(as_text=True)
+    # a file over the limit is refused, not cut short and parsed
+    padded = yaml.safe_dump(inventory()).encode() + b"#" * MAX_INVENTORY_BYTES
+    fields = {**form, "inventory_file": FileStorage(io.BytesIO(padded), "servers.yaml")}
+    boundary, body = encode_multipart(MultiDict(fields))  # in memory: no temporary file left open
+    too_big = client.post(
+        url + "/provider", data=body, content_type=f"multipart/form-data; boundary={boundary}"
+    )
+    assert too_big.status_code == 400 and "at most 1024 KiB" in too_big.get_data(as_text=True)
     assert launch.kept_settings(ours.id) == {}
     # the form without its CSRF token: refused too
     assert client.post(url + "/provider", data={"provider": "servers"}).status_code == 400
