@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from drcsim.rundir import SCORE_EVENTS
 from marshmallow import Schema, fields, validate
 
 from cloudsim.web.inputs import INT64_MAX, Int
@@ -12,7 +13,7 @@ WHEN = {"format": "ISO 8601 with a zone"}
 
 
 class UploadedScoreEventSchema(Schema):
-    kind = fields.Str(required=True, validate=validate.OneOf(["checkpoint", "fall", "end"]))
+    kind = fields.Str(required=True, validate=validate.OneOf(SCORE_EVENTS))
     checkpoint = Int(minimum=0, allow_none=True, load_default=None)
     points = Int(minimum=0, maximum=1000, load_default=0)
     sim_time = fields.Float(required=True, validate=validate.Range(min=0, max=1e7))

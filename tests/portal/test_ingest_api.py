@@ -89,7 +89,14 @@ def test_a_run_and_its_log_uploaded_as_documented(master: Flask) -> None:
                 "points": 1,
                 "sim_time": 412.5,
                 "wall_time": (started + timedelta(seconds=413)).isoformat(),
-            }
+            },
+            {  # every run a simulator ends has this last one
+                "kind": "run_end",
+                "points": 0,
+                "sim_time": 1800.0,
+                "wall_time": (started + timedelta(minutes=30)).isoformat(),
+                "description": "time_limit",
+            },
         ],
         "logs": [
             {
