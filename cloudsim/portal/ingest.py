@@ -28,6 +28,7 @@ from cloudsim.errors import CloudSimError, Conflict, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Artifact, Run, RunState, ScoreEvent, Task, TeamInstance, utcnow
 from cloudsim.portal import staging
+from cloudsim.web.inputs import as_id
 
 TASK_KEY = re.compile(r"^m([0-9]{1,12})$")  # the master's task, as its instances name it
 PIECE = 1024 * 1024
@@ -83,7 +84,8 @@ def _task_for(instance: TeamInstance, record_: dict[str, Any]) -> Task:
             f"a result for team {record_['team']!r}: {instance.name} serves {team.name!r} only"
         )
     match = TASK_KEY.match(record_["task_key"])
-    task = db.session.get(Task, int(match.group(1))) if match else None
+    task_id = as_id(match.group(1)) if match else None  # past int32: no such row (and no 5xx)
+    task = db.session.get(Task, task_id) if task_id is not None else None
     if task is None or task.team_id != team.id:
         raise Refused(
             f"task {record_['task_key']!r} ({record_['task_name']!r}) was not scheduled "

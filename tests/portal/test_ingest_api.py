@@ -21,12 +21,14 @@ from cloudsim.portal.credentials import upload_token
 from provisioners.remote import pki
 from tests.conftest import make_user, running_app, token_for
 from tests.portal.support import team_instance
-from tests.support.servers import RedisServer
+from tests.support.servers import PostgresServer, RedisServer
 
 
 @pytest.fixture
-def master(make_config: Callable[..., Config]) -> Iterator[Flask]:
-    with running_app(make_config(portal_url="https://127.0.0.1:5443/")) as app:
+def master(make_config: Callable[..., Config], postgres_server: PostgresServer) -> Iterator[Flask]:
+    # PostgreSQL, as a master runs: it refuses ids SQLite would take (past int32)
+    database = postgres_server.create_database("cloudsim_portal_api")
+    with running_app(make_config(database, portal_url="https://127.0.0.1:5443/")) as app:
         yield app
 
 
@@ -144,6 +146,10 @@ def test_a_run_and_its_log_uploaded_as_documented(master: Flask) -> None:
         "/api/v1/portal/ingest/runs/8", json=dict(record, uplink_bits=1), headers=uploader
     )
     assert other.status_code == 403 and "caps" in other.json["message"]
+    unknown = client.put(
+        "/api/v1/portal/ingest/runs/8", json=dict(record, task_key="m99999999999"), headers=uploader
+    )
+    assert unknown.status_code == 403 and "not scheduled" in unknown.json["message"]
     # a user's API token is no upload token, and an upload token opens nothing else
     assert client.put(base, json=record, headers=officer).status_code == 401
     for url in ("/api/v1/runs", f"/api/v1/runs/{run['id']}", "/api/v1/portal/refusals"):
