@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from flask import Blueprint, Response, flash, redirect, render_template, url_for
+from flask import Blueprint, flash, redirect, render_template, url_for
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 from flask_wtf import FlaskForm
@@ -15,6 +15,7 @@ from cloudsim.auth.policy import role_required
 from cloudsim.errors import CloudSimError, InvalidInput
 from cloudsim.extensions import db
 from cloudsim.models import Role
+from cloudsim.web.downloads import attachment
 from cloudsim.web.inputs import uploaded_text
 from cloudsim.worlds import service
 
@@ -80,8 +81,6 @@ def show(name: str) -> ResponseReturnValue:
 @role_required(Role.ADMIN)
 def download(name: str) -> ResponseReturnValue:
     world = service.get_world(current_user, name)
-    return Response(
-        json.dumps(world.document, indent=2) + "\n",
-        mimetype="application/json",
-        headers={"Content-Disposition": f'attachment; filename="{world.name}.json"'},
+    return attachment(
+        json.dumps(world.document, indent=2) + "\n", f"{world.name}.json", "application/json"
     )
