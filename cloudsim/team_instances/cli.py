@@ -134,13 +134,14 @@ def terminate(name: str, as_json: bool) -> None:
 
 @instance.command("provider")
 @click.argument("name")
-@click.argument("provider", type=click.Choice([p for p in PROVIDERS if p != "local"]))
+# the only provider an inventory file sets up; ec2's fields go on the page or the API
+@click.argument("provider", type=click.Choice(["servers"]))
 @click.option(
     "--inventory",
     "inventory_file",
     required=True,
     type=click.File("r"),
-    help="servers: the YAML inventory of the machines this instance launches on.",
+    help="The YAML inventory of the machines this instance launches on.",
 )
 @reports_errors
 def provider(name: str, provider: str, inventory_file: TextIO) -> None:

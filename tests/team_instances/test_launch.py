@@ -250,6 +250,9 @@ def test_cli_as_the_readme_shows_it(
     assert "kept (encrypted)" in cli(
         "instance", "provider", "team-8", "servers", "--inventory", str(servers)
     )
+    # an inventory sets up servers only: ec2 is not offered (its fields: the page or the API)
+    refused = cli("instance", "provider", "team-8", "ec2", code=2)
+    assert "'ec2' is not 'servers'" in refused
     (row,) = json.loads(cli("instance", "launch", "team-8", "--kind", "vrc", "--wait", "--json"))
     assert (row["instance"], row["state"], row["why"]) == (
         "team-8",
