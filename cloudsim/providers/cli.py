@@ -6,7 +6,6 @@ import sys
 from typing import TextIO
 
 import click
-import yaml
 
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import SYSTEM
@@ -17,6 +16,7 @@ from cloudsim.providers.service import (
     configure_provider,
     ec2_settings,
     provider_settings,
+    servers_settings,
 )
 
 
@@ -95,10 +95,7 @@ def configure_ec2(
 @reports_errors
 def configure_servers(inventory_file: TextIO) -> None:
     """Existing machines reachable by SSH (e.g. bare-metal servers), from an inventory file."""
-    try:
-        inventory = yaml.safe_load(inventory_file)
-    except yaml.YAMLError as exc:
-        raise click.ClickException(f"{inventory_file.name}: not YAML: {exc}") from None
+    inventory = servers_settings(inventory_file, inventory_file.name)["inventory"]
     if not isinstance(inventory, list):
         raise click.ClickException(f"{inventory_file.name}: expected a list of servers")
     with app_context():

@@ -10,8 +10,9 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import IO, Any, cast
 
+import yaml
 from libcloud.compute.base import Node, NodeImage, NodeSize
 from sqlalchemy import select
 
@@ -100,6 +101,14 @@ def provider_settings(name: str) -> dict[str, Any]:
             f"`cloudsim provider configure {name} ...`"
         )
     return cast(dict[str, Any], json.loads(secret.value))
+
+
+def servers_settings(inventory: str | IO[str], where: str) -> dict[str, Any]:
+    """Return the servers provider's settings from an inventory's YAML; refuse what is not YAML."""
+    try:
+        return {"inventory": yaml.safe_load(inventory)}
+    except yaml.YAMLError as exc:
+        raise InvalidInput(f"{where}: not YAML: {exc}") from None
 
 
 def ec2_settings(

@@ -7,7 +7,6 @@ import time
 from typing import TextIO
 
 import click
-import yaml
 from flask import current_app
 
 from cloudsim.auth.policy import SYSTEM
@@ -16,7 +15,7 @@ from cloudsim.extensions import db
 from cloudsim.launched_constellations.cli import follow_job
 from cloudsim.models import TeamInstance
 from cloudsim.people.service import find_team
-from cloudsim.providers.service import PROVIDERS
+from cloudsim.providers.service import PROVIDERS, servers_settings
 from cloudsim.team_instances import launch as launches
 from cloudsim.team_instances import service
 from cloudsim.team_instances.poll import check_instances
@@ -146,12 +145,9 @@ def terminate(name: str, as_json: bool) -> None:
 @reports_errors
 def provider(name: str, provider: str, inventory_file: TextIO) -> None:
     """Keep (encrypted) the provider settings handed to instance NAME when it launches."""
-    try:
-        inventory = yaml.safe_load(inventory_file)
-    except yaml.YAMLError as exc:
-        raise click.ClickException(f"{inventory_file.name}: not YAML: {exc}") from None
+    settings = servers_settings(inventory_file, inventory_file.name)
     with app_context():
-        found = launches.set_provider_settings(SYSTEM, name, provider, {"inventory": inventory})
+        found = launches.set_provider_settings(SYSTEM, name, provider, settings)
         click.echo(f"{found.name}: {provider} settings kept (encrypted), handed over at launch")
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import yaml
 from flask_wtf import FlaskForm
 from flask_wtf.file import FileField
 from wtforms import (
@@ -19,7 +18,7 @@ from wtforms.validators import DataRequired, Length, NumberRange, Optional
 
 from cloudsim.errors import InvalidInput
 from cloudsim.models import Team
-from cloudsim.providers.service import PROVIDERS, ec2_settings
+from cloudsim.providers.service import PROVIDERS, ec2_settings, servers_settings
 from cloudsim.web.inputs import uploaded_text
 from constellations.definition import available_kinds
 
@@ -111,10 +110,7 @@ class ProviderSettingsForm(FlaskForm):
         )
         if not text.strip():
             raise InvalidInput("choose an inventory file or paste the inventory")
-        try:
-            return {"inventory": yaml.safe_load(text)}
-        except yaml.YAMLError as exc:
-            raise InvalidInput(f"servers inventory: not YAML: {exc}") from None
+        return servers_settings(text, "servers inventory")
 
     def _ec2(self) -> dict[str, Any]:
         return ec2_settings(
