@@ -109,7 +109,7 @@ def outcome(instance: TeamInstance, job_id: str | None = None) -> Outcome:
     """Summarise where an instance's launch is, from what the master last saw."""
     launch = instance.launch or {}
     state = launch.get("state")
-    team = instance.team.name if instance.team else None
+    team = _team(instance)
     if state is None:
         return Outcome(instance.id, instance.name, team, "failed", "not launched", job_id)
     if state == "ready":
