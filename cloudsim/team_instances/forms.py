@@ -62,8 +62,9 @@ class AssignForm(FlaskForm):
 class LaunchThroughForm(FlaskForm):
     """The kind and provider of every team's constellation, launched through its instance."""
 
-    kind = SelectField("Kind", default="vrc")
-    provider = SelectField("Provider", default="servers")
+    # own ids: the deploy form on the same page has a `provider` too (labels find their field)
+    kind = SelectField("Kind", default="vrc", id="launch-kind")
+    provider = SelectField("Provider", default="servers", id="launch-provider")
 
     def offer(self) -> LaunchThroughForm:
         """Fill the choices."""

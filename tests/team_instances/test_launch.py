@@ -133,6 +133,7 @@ def test_api_and_page_as_the_readme_shows_them(app: Flask, team_a: Team) -> None
     log_in(client, admin)
     page = client.get("/team-instances").get_data(as_text=True)
     assert page.count("Launch for every team") == 1  # the form, once, in the page's body
+    assert page.count('id="provider"') == 1  # the deploy form's: each label finds its field
     form = {"csrf_token": csrf_token(page), "kind": "simple", "provider": "servers"}
     answer = client.post("/team-instances/launch", data=form, follow_redirects=True)
     assert answer.status_code == 200
