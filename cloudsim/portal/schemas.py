@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from datetime import UTC, datetime
+from typing import Any
+
 from drcsim.rundir import SCORE_EVENTS
-from marshmallow import Schema, fields, validate
+from marshmallow import Schema, ValidationError, fields, validate
 
 from cloudsim.web.inputs import INT64_MAX, Int
 
@@ -12,12 +15,23 @@ BITS = validate.Range(min=0, max=INT64_MAX)
 WHEN = {"format": "ISO 8601 with a zone"}
 
 
+class When(fields.AwareDateTime):
+    """An ISO 8601 time with a zone, read as UTC (the zone it is stored and compared in)."""
+
+    def _deserialize(self, value: Any, attr: str | None, data: Any, **kwargs: Any) -> datetime:
+        when = super()._deserialize(value, attr, data, **kwargs)
+        try:
+            return when.astimezone(UTC)
+        except OverflowError:  # 0001-01-01 at +05:00 is before year 1 in UTC: no 5xx later
+            raise ValidationError("a time UTC can hold (years 1 to 9999)") from None
+
+
 class UploadedScoreEventSchema(Schema):
     kind = fields.Str(required=True, validate=validate.OneOf(SCORE_EVENTS))
     checkpoint = Int(minimum=0, allow_none=True, load_default=None)
     points = Int(minimum=0, maximum=1000, load_default=0)
     sim_time = fields.Float(required=True, validate=validate.Range(min=0, max=1e7))
-    wall_time = fields.AwareDateTime(required=True, metadata=WHEN)
+    wall_time = When(required=True, metadata=WHEN)
     description = fields.Str(load_default="", validate=validate.Length(max=255))
 
 
@@ -57,11 +71,11 @@ class RunRecordSchema(Schema):
     downlink_bits = fields.Int(required=True, validate=BITS, metadata={"description": "the cap"})
     timeout_s = Int(required=True, minimum=1, maximum=86_400)
     seconds_left = fields.Float(required=True, validate=validate.Range(min=0, max=1e7))
-    uplink_spent_at = fields.AwareDateTime(allow_none=True, load_default=None, metadata=WHEN)
-    downlink_spent_at = fields.AwareDateTime(allow_none=True, load_default=None, metadata=WHEN)
-    started_at = fields.AwareDateTime(required=True, metadata=WHEN)
-    running_at = fields.AwareDateTime(allow_none=True, load_default=None, metadata=WHEN)
-    finished_at = fields.AwareDateTime(required=True, allow_none=True, metadata=WHEN)
+    uplink_spent_at = When(allow_none=True, load_default=None, metadata=WHEN)
+    downlink_spent_at = When(allow_none=True, load_default=None, metadata=WHEN)
+    started_at = When(required=True, metadata=WHEN)
+    running_at = When(allow_none=True, load_default=None, metadata=WHEN)
+    finished_at = When(required=True, allow_none=True, metadata=WHEN)
     score_events = fields.List(
         fields.Nested(UploadedScoreEventSchema),
         required=True,

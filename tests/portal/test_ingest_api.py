@@ -150,6 +150,10 @@ def test_a_run_and_its_log_uploaded_as_documented(master: Flask) -> None:
         "/api/v1/portal/ingest/runs/8", json=dict(record, task_key="m99999999999"), headers=uploader
     )
     assert unknown.status_code == 403 and "not scheduled" in unknown.json["message"]
+    for field in ("running_at", "uplink_spent_at"):  # a time UTC cannot hold: 400, not a 500
+        early = dict(record, state="error", **{field: "0001-01-01T00:00:00+05:00"})
+        answer = client.put("/api/v1/portal/ingest/runs/9", json=early, headers=uploader)
+        assert answer.status_code == 400 and field in answer.json["errors"]["json"], answer.json
     # a user's API token is no upload token, and an upload token opens nothing else
     assert client.put(base, json=record, headers=officer).status_code == 401
     for url in ("/api/v1/runs", f"/api/v1/runs/{run['id']}", "/api/v1/portal/refusals"):
