@@ -71,8 +71,17 @@ class Bandwidth:
     spent_at: datetime | None = None  # from the final counters: when the cap was spent
 
 
+# A log's seconds past this are not a run's (runs last minutes): such a line is malformed, and
+# keeping it would grow the per-second list to its size.
+MAX_SECOND = 7 * 24 * 3600
+
+
 def read_bandwidth_log(lines: Iterable[str]) -> dict[str, Bandwidth]:
-    """Return each direction's per-second bits from the router's bandwidth log (JSON lines)."""
+    """Return each direction's per-second bits from the router's bandwidth log (JSON lines).
+
+    Lines that are not the log's records (torn, or malformed in a copy uploaded from elsewhere)
+    are skipped: the rest of the log still reads.
+    """
     result = {d: Bandwidth() for d in DIRECTIONS}
     start: datetime | None = None
     for line in lines:
@@ -80,30 +89,45 @@ def read_bandwidth_log(lines: Iterable[str]) -> dict[str, Bandwidth]:
             continue
         try:
             record = json.loads(line)
-        except ValueError:
-            continue  # a torn last line of a log copied while the router wrote it
-        if record.get("event") == "armed":
-            start = datetime.fromisoformat(record["time"])
-            for direction in DIRECTIONS:
-                result[direction].cap_bits = (record.get("caps_bits") or {}).get(direction)
-            continue
-        if record.get("event") == "disarmed":
-            for direction in DIRECTIONS:
-                when = ((record.get("counters") or {}).get(direction) or {}).get("spent_at")
-                result[direction].spent_at = datetime.fromisoformat(when) if when else None
-            continue
-        direction = record.get("direction")
-        if direction not in result or "bytes" not in record:
-            continue
-        if "second" in record:  # line N covers N-1..N s after the arm
-            second = max(0, int(record["second"]) - 1)
-        else:
-            moment = datetime.fromisoformat(record["time"])
-            start = start or moment
-            second = max(0, round((moment - start).total_seconds()) - 1)
-        series = result[direction]
-        series.bits_per_second.extend([0] * (second + 1 - len(series.bits_per_second)))
-        series.bits_per_second[second] += 8 * int(record["bytes"])
-        series.used_bits = 8 * int(record.get("cumulative_bytes", 0))
-        series.remaining_bits = record.get("cap_remaining_bits")
+            if isinstance(record, dict):
+                start = _read_record(record, result, start)
+        except (ValueError, TypeError, KeyError, AttributeError, OverflowError):
+            continue  # e.g. a torn last line of a log copied while the router wrote it
     return result
+
+
+def _read_record(
+    record: dict[str, Any], result: dict[str, Bandwidth], start: datetime | None
+) -> datetime | None:
+    """Add one record to the directions' series; return the arm time known after it."""
+    if record.get("event") == "armed":
+        armed = datetime.fromisoformat(record["time"])
+        caps = {d: (record.get("caps_bits") or {}).get(d) for d in DIRECTIONS}
+        caps = {d: None if cap is None else int(cap) for d, cap in caps.items()}
+        for direction in DIRECTIONS:
+            result[direction].cap_bits = caps[direction]
+        return armed
+    if record.get("event") == "disarmed":
+        for direction in DIRECTIONS:
+            when = ((record.get("counters") or {}).get(direction) or {}).get("spent_at")
+            result[direction].spent_at = datetime.fromisoformat(when) if when else None
+        return start
+    name = record.get("direction")
+    if name not in result or "bytes" not in record:
+        return start
+    if "second" in record:  # line N covers N-1..N s after the arm
+        second = max(0, int(record["second"]) - 1)
+    else:
+        moment = datetime.fromisoformat(record["time"])
+        start = start or moment
+        second = max(0, round((moment - start).total_seconds()) - 1)
+    if second > MAX_SECOND:
+        raise ValueError(f"second {second} is past any run")
+    bits, used = 8 * int(record["bytes"]), 8 * int(record.get("cumulative_bytes", 0))
+    remaining = record.get("cap_remaining_bits")
+    series = result[name]
+    series.bits_per_second.extend([0] * (second + 1 - len(series.bits_per_second)))
+    series.bits_per_second[second] += bits
+    series.used_bits = used
+    series.remaining_bits = None if remaining is None else int(remaining)
+    return start
