@@ -106,13 +106,20 @@ def test_a_run_and_its_log_uploaded_as_documented(master: Flask) -> None:
                 "kind": "score",
                 "size": len(log),
                 "sha256": hashlib.sha256(log).hexdigest(),
-            }
+            },
+            {  # an empty log (no commands sent): no piece to send, stored as it is declared
+                "filename": "commands.jsonl",
+                "kind": "commands",
+                "size": 0,
+                "sha256": hashlib.sha256(b"").hexdigest(),
+            },
         ],
     }
     base = "/api/v1/portal/ingest/runs/7"
     sent = client.put(base, json=record, headers=uploader)
     assert sent.status_code == 200, sent.json
     assert sent.json["logs"][0]["received"] == 0 and not sent.json["complete"]
+    assert sent.json["logs"][1]["complete"]
     half = len(log) // 2
     piece = client.put(
         f"{base}/logs/score.jsonl?offset=0",
@@ -135,9 +142,8 @@ def test_a_run_and_its_log_uploaded_as_documented(master: Flask) -> None:
     run = client.get(f"/api/v1/runs/{done.json['run_id']}", headers=officer).json
     assert (run["instance_id"], run["remote_run_id"], run["score"]) == (instance.id, 7, 1)
     assert run["score_events"][0]["sim_time"] == 412.5
-    stored = client.get(
-        f"/api/v1/runs/{run['id']}/logs/{run['artifacts'][0]['id']}", headers=officer
-    )
+    logs = {a["filename"]: a["id"] for a in run["artifacts"]}
+    stored = client.get(f"/api/v1/runs/{run['id']}/logs/{logs['score.jsonl']}", headers=officer)
     assert stored.data == log
     assert stored.headers["X-Checksum-SHA256"] == hashlib.sha256(log).hexdigest()
     # the same body again: the same run; other caps than the task's: refused
