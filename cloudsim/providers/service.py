@@ -19,7 +19,7 @@ from sqlalchemy import select
 from cloudsim.config import Config
 from cloudsim.errors import InvalidInput
 from cloudsim.extensions import db
-from cloudsim.models import Secret, SecretKind
+from cloudsim.models import Secret, SecretKind, utcnow
 from provisioners.providers.base import CloudSimNodeDriver
 from provisioners.providers.errors import SettingsError
 from provisioners.providers.registry import PROVIDERS as REGISTRY
@@ -27,6 +27,7 @@ from provisioners.providers.registry import ProviderSpec, provider
 
 PROVIDERS = tuple(REGISTRY)
 SETTINGS_PREFIX = "provider:"
+INSTALLATION = ("installation", 0)  # the owner of the settings every launch here uses
 CONSTELLATION_TAG = "cloudsim:constellation"
 
 
@@ -94,7 +95,7 @@ def open_provider(name: str, config: Config) -> Provider:
 
 def provider_settings(name: str) -> dict[str, Any]:
     """Return a provider's stored settings, or say how to configure them."""
-    secret = _stored(name)
+    secret = stored_settings(name)
     if secret is None:
         raise InvalidInput(
             f"provider {name} is not configured: an admin runs "
@@ -153,25 +154,33 @@ def check_settings(name: str, settings: dict[str, Any]) -> None:
         raise InvalidInput(str(exc)) from None
 
 
-def configure_provider(name: str, settings: dict[str, Any]) -> None:
-    """Store (encrypted) a provider's settings, replacing earlier ones; refuse bad ones."""
+def configure_provider(
+    name: str, settings: dict[str, Any], owner: tuple[str, int] = INSTALLATION
+) -> None:
+    """Store (encrypted) a provider's settings, the installation's or an owner's (a team
+    instance's), replacing earlier ones; refuse bad ones."""
     check_settings(name, settings)
-    secret = _stored(name)
+    secret = stored_settings(name, owner)
     if secret is None:
         secret = Secret(
             kind=SecretKind.CLOUD_CREDENTIALS,
-            owner_type="installation",
+            owner_type=owner[0],
+            owner_id=owner[1],
             name=SETTINGS_PREFIX + name,
             value="",
         )
         db.session.add(secret)
     secret.value = json.dumps(settings)
+    secret.created_at = utcnow()  # when these settings were set, as a team instance's page says
     db.session.flush()
 
 
-def _stored(name: str) -> Secret | None:
+def stored_settings(name: str, owner: tuple[str, int] = INSTALLATION) -> Secret | None:
+    """Return the secret holding a provider's settings (the installation's or an owner's)."""
     return db.session.scalar(
         select(Secret).where(
-            Secret.owner_type == "installation", Secret.name == SETTINGS_PREFIX + name
+            Secret.owner_type == owner[0],
+            Secret.owner_id == owner[1],
+            Secret.name == SETTINGS_PREFIX + name,
         )
     )

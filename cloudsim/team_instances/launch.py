@@ -24,8 +24,8 @@ from cloudsim.errors import InvalidInput
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, Payload, job_kind
 from cloudsim.jobs.service import enqueue
-from cloudsim.models import InstanceState, Role, Secret, SecretKind, TeamInstance, utcnow
-from cloudsim.providers.service import check_settings
+from cloudsim.models import InstanceState, Role, Secret, TeamInstance, utcnow
+from cloudsim.providers.service import SETTINGS_PREFIX, configure_provider, stored_settings
 from cloudsim.team_instances import service
 from cloudsim.team_instances.client import Endpoint, InstanceError, call
 from constellations.definition import DefinitionError, kind_data
@@ -33,20 +33,13 @@ from provisioners.providers.registry import PROVIDERS, provider
 
 LAUNCH_JOB = "team_instance.launch"
 OWNER = "team_instance"
-SETTINGS_PREFIX = "provider:"
 # what the instance's constellation is in, as the master last saw it: still going, or done
 GOING = {"starting", "pending", "launching"}
 FAILED = {"failed", "error", "terminating", "terminated"}
 
 
 def _stored(instance_id: int, name: str) -> Secret | None:
-    return db.session.scalar(
-        select(Secret).where(
-            Secret.owner_type == OWNER,
-            Secret.owner_id == instance_id,
-            Secret.name == SETTINGS_PREFIX + name,
-        )
-    )
+    return stored_settings(name, (OWNER, instance_id))
 
 
 def set_provider_settings(
@@ -55,20 +48,7 @@ def set_provider_settings(
     """Keep (encrypted) the provider settings the master hands this instance at launch
     (admins); checked as `cloudsim provider configure` checks them."""
     instance = service.get_instance(actor, ref)
-    check_settings(name, settings)  # as `cloudsim provider configure` checks them
-    secret = _stored(instance.id, name)
-    if secret is None:
-        secret = Secret(
-            kind=SecretKind.CLOUD_CREDENTIALS,
-            owner_type=OWNER,
-            owner_id=instance.id,
-            name=SETTINGS_PREFIX + name,
-            value="",
-        )
-        db.session.add(secret)
-    secret.value = json.dumps(settings)
-    secret.created_at = utcnow()  # when these settings were set, as the instance's page says
-    db.session.flush()
+    configure_provider(name, settings, (OWNER, instance.id))
     # which provider, never what: the settings hold credentials
     record(
         "team_instance.provider",
