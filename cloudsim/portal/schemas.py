@@ -2,28 +2,14 @@
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
-from typing import Any
-
 from drcsim.rundir import SCORE_EVENTS
-from marshmallow import Schema, ValidationError, fields, validate
+from marshmallow import Schema, fields, validate
 
-from cloudsim.web.inputs import INT64_MAX, Int
+from cloudsim.web.inputs import INT64_MAX, Int, When
 
 LOG_NAME = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,200}$"
 BITS = validate.Range(min=0, max=INT64_MAX)
 WHEN = {"format": "ISO 8601 with a zone"}
-
-
-class When(fields.AwareDateTime):
-    """An ISO 8601 time with a zone, read as UTC (the zone it is stored and compared in)."""
-
-    def _deserialize(self, value: Any, attr: str | None, data: Any, **kwargs: Any) -> datetime:
-        when = super()._deserialize(value, attr, data, **kwargs)
-        try:
-            return when.astimezone(UTC)
-        except OverflowError:  # 0001-01-01 at +05:00 is before year 1 in UTC: no 5xx later
-            raise ValidationError("a time UTC can hold (years 1 to 9999)") from None
 
 
 class UploadedScoreEventSchema(Schema):

@@ -5,7 +5,7 @@ from __future__ import annotations
 from marshmallow import Schema, fields, validate
 
 from cloudsim.jobs.schemas import JobSchema
-from cloudsim.web.inputs import Id
+from cloudsim.web.inputs import Id, When
 
 
 class HealthSchema(Schema):
@@ -94,8 +94,8 @@ class DesiredTaskSchema(Schema):
     name = fields.Str(required=True, validate=validate.Length(min=1, max=120))
     world = fields.Str(required=True, validate=validate.Length(min=1, max=64))
     run_config = fields.Int(required=True, validate=validate.Range(min=1, max=100))
-    window_start = fields.AwareDateTime(required=True)
-    window_stop = fields.AwareDateTime(required=True)
+    window_start = When(required=True)
+    window_stop = When(required=True)
     time_zone = fields.Str(required=True, validate=validate.Length(min=1, max=64))
     timeout_s = fields.Int(required=True, validate=validate.Range(min=1, max=86_400))
     latency_ms = fields.Int(required=True, validate=validate.Range(min=0, max=10_000))

@@ -9,12 +9,13 @@ converter, the JSON loader, the one integer field of the API's schemas and of th
 from __future__ import annotations
 
 import json
+from datetime import UTC, datetime
 from typing import Any
 
 from flask import Flask, request
 from flask.json.provider import DefaultJSONProvider
 from flask.wrappers import Request
-from marshmallow import fields, validate
+from marshmallow import ValidationError, fields, validate
 from werkzeug.datastructures import FileStorage
 from werkzeug.exceptions import BadRequest
 from werkzeug.routing import IntegerConverter, Map
@@ -208,3 +209,14 @@ def init_inputs(app: Flask) -> None:
     app.json_provider_class = JSONProvider
     app.json = JSONProvider(app)
     app.config["MAX_CONTENT_LENGTH"] = MAX_BODY_BYTES
+
+
+class When(fields.AwareDateTime):
+    """An ISO 8601 time with a zone, read as UTC (the zone it is stored and compared in)."""
+
+    def _deserialize(self, value: Any, attr: str | None, data: Any, **kwargs: Any) -> datetime:
+        when = super()._deserialize(value, attr, data, **kwargs)
+        try:
+            return when.astimezone(UTC)
+        except OverflowError:  # 0001-01-01 at +05:00 is before year 1 in UTC: no 5xx later
+            raise ValidationError("a time UTC can hold (years 1 to 9999)") from None

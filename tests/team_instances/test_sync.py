@@ -165,6 +165,23 @@ def test_only_admins_push_and_bad_input_changes_nothing(app: Flask) -> None:
     answer = client.put(DESIRED, json=bad, headers=admin)
     assert answer.status_code == 422 or answer.status_code == 400, answer.get_json()
     assert db.session.scalar(select(User).where(User.email == "x@example.org")) is None
+    task = {
+        "key": "m1",
+        "name": "Walking 1",
+        "world": "vrc_task_2",
+        "run_config": 1,
+        "window_start": "0001-01-01T00:00:00+05:00",  # before year 1 in UTC: 400, not a 500
+        "window_stop": "2030-01-01T00:00:00+00:00",
+        "time_zone": "UTC",
+        "timeout_s": 1800,
+        "latency_ms": 0,
+        "uplink_bits": 1,
+        "downlink_bits": 1,
+        "order": 0,
+    }
+    early = client.put(DESIRED, json=dict(body, tasks=[task]), headers=admin)
+    assert early.status_code == 400, early.get_json()
+    assert "window_start" in str(early.get_json())
     assert client.get("/api/v1/instance/health", headers=officer).status_code == 403
     health = client.get("/api/v1/instance/health", headers=admin).get_json()
     assert health["database"] and health["queue"] and health["version"]
