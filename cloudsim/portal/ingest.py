@@ -18,6 +18,7 @@ from typing import IO, Any
 
 from flask import current_app
 from sqlalchemy import select
+from sqlalchemy.exc import IntegrityError
 from werkzeug.exceptions import ClientDisconnected
 
 from cloudsim.audit.service import record
@@ -125,18 +126,25 @@ def _check_window(task: Task, record_: dict[str, Any], config: Config) -> None:
         )
 
 
-def _check_once(task: Task, record_: dict[str, Any]) -> None:
+def _check_once(
+    task: Task, record_: dict[str, Any], instance: TeamInstance, remote_id: int
+) -> Run | None:
+    """Refuse a second finished run of a task; return the run itself if it is the one the
+    task has (the same record sent twice at once: the other request stored it meanwhile)."""
     if record_["state"] != RunState.FINISHED.value:
-        return
+        return None
     other = db.session.scalar(
-        select(Run.id).where(
+        select(Run).where(
             Run.task_id == task.id,
             Run.state == RunState.FINISHED,
             Run.invalidated_at.is_(None),
         )
     )
-    if other is not None:
-        raise Refused(f"task {task.name!r} already has a finished run (run {other})")
+    if other is None:
+        return None
+    if (other.instance_id, other.remote_run_id) == (instance.id, remote_id):
+        return other
+    raise Refused(f"task {task.name!r} already has a finished run (run {other.id})")
 
 
 def receive_run(instance: TeamInstance, remote_id: int, record_: dict[str, Any]) -> Run:
@@ -147,7 +155,9 @@ def receive_run(instance: TeamInstance, remote_id: int, record_: dict[str, Any])
     config: Config = current_app.config["CLOUDSIM"]
     task = _task_for(instance, record_)
     _check_window(task, record_, config)
-    _check_once(task, record_)
+    twin = _check_once(task, record_, instance, remote_id)
+    if twin is not None:
+        return twin
     names = [log["filename"] for log in record_["logs"]]
     if len(set(names)) != len(names):
         raise Refused("a log file is listed twice")
@@ -182,7 +192,14 @@ def receive_run(instance: TeamInstance, remote_id: int, record_: dict[str, Any])
     if not names:
         run.logs_complete_at = utcnow()
     db.session.add(run)
-    db.session.flush()
+    try:
+        db.session.flush()
+    except IntegrityError:  # the same record sent twice at once: the other request stored it
+        db.session.rollback()
+        twin = uploaded_run(instance, remote_id)
+        if twin is None:
+            raise
+        return twin
     for log in record_["logs"]:
         if log["size"] == 0:  # no piece will ever come: stored now (its checksum checked)
             part = _staged(run, log["filename"])

@@ -2,16 +2,28 @@
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 from datetime import timedelta
 from pathlib import Path
+from typing import Any
 
 from csrouter.bandwidth_log import read_bandwidth_log
 
 from cloudsim.extensions import db
-from cloudsim.models import Constellation, Run, RunState, Task, TeamInstance, utcnow
+from cloudsim.models import (
+    Constellation,
+    ConstellationState,
+    Run,
+    RunState,
+    Task,
+    Team,
+    TeamInstance,
+    utcnow,
+)
 from cloudsim.models.team_instances import InstanceState
-from tests.competition.support import store_log
+from cloudsim.portal.credentials import upload_token
+from tests.competition.support import open_task, store_log
 from tests.support.season import bandwidth_log, score_log
 
 _serial = itertools.count(1)
@@ -85,3 +97,50 @@ def team_instance(team_id: int, name: str, url: str) -> TeamInstance:
     db.session.add(instance)
     db.session.commit()
     return instance
+
+
+def uploader(
+    team: Team, log: bytes, state: str = "finished"
+) -> tuple[dict[str, str], dict[str, Any]]:
+    """Add an instance of the team; return its upload token and the record of an ended run of
+    a fresh task, with two logs of the given bytes."""
+    opened = utcnow() - timedelta(hours=1)
+    task = open_task(team.id, name="Driving 1", window_start=opened)
+    instance = TeamInstance(
+        name="ti-a",
+        team=team,
+        constellation=Constellation(
+            name="ti-a", kind="cloudsim", provider="local", state=ConstellationState.READY
+        ),
+    )
+    db.session.add(instance)
+    db.session.flush()
+    token = {"Authorization": f"Bearer {upload_token(instance)}"}
+    started = utcnow() - timedelta(minutes=30)
+    declared = {"filename": "", "kind": "state", "size": len(log)}
+    record = {
+        "team": team.name,
+        "task_key": f"m{task.id}",
+        "task_name": task.name,
+        "world": task.world,
+        "run_config": task.run_config,
+        "state": state,
+        "score": 1,
+        "falls": 0,
+        "sim_seconds": 600.0,
+        "uplink_bits_used": 1000,
+        "downlink_bits_used": 1000,
+        "uplink_bits": task.uplink_bits,
+        "downlink_bits": task.downlink_bits,
+        "timeout_s": task.timeout_s,
+        "seconds_left": 0.0,
+        "started_at": started.isoformat(),
+        "finished_at": (started + timedelta(minutes=10)).isoformat(),
+        "score_events": [],
+        "logs": [
+            dict(declared, filename=name, sha256=hashlib.sha256(log).hexdigest())
+            for name in ("a.bin", "b.bin")
+        ],
+    }
+    db.session.commit()
+    return token, record

@@ -4,7 +4,6 @@ one's removed by the beat after CLOUDSIM_PORTAL_STAGING_HOURS, one under way nev
 from __future__ import annotations
 
 import fcntl
-import hashlib
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -19,17 +18,14 @@ from sqlalchemy import select
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.models import (
-    Constellation,
-    ConstellationState,
     PortalRefusal,
     Team,
-    TeamInstance,
     utcnow,
 )
 from cloudsim.portal import staging
-from cloudsim.portal.credentials import upload_token
 from tests.competition.support import open_task
 from tests.conftest import running_app
+from tests.portal.support import uploader
 
 LOG = os.urandom(4000)
 HOURS = 48
@@ -39,50 +35,6 @@ HOURS = 48
 def master(make_config: Callable[..., Config]) -> Iterator[Flask]:
     with running_app(make_config(portal_url="https://127.0.0.1:5443/")) as app:
         yield app
-
-
-def _uploader(team: Team) -> tuple[dict[str, str], dict[str, Any]]:
-    """An upload token of the team's instance and a finished run's record with two logs."""
-    opened = utcnow() - timedelta(hours=1)
-    task = open_task(team.id, name="Driving 1", window_start=opened)
-    instance = TeamInstance(
-        name="ti-a",
-        team=team,
-        constellation=Constellation(
-            name="ti-a", kind="cloudsim", provider="local", state=ConstellationState.READY
-        ),
-    )
-    db.session.add(instance)
-    db.session.flush()
-    token = {"Authorization": f"Bearer {upload_token(instance)}"}
-    started = utcnow() - timedelta(minutes=30)
-    declared = {"filename": "", "kind": "state", "size": len(LOG)}
-    record = {
-        "team": team.name,
-        "task_key": f"m{task.id}",
-        "task_name": task.name,
-        "world": task.world,
-        "run_config": task.run_config,
-        "state": "finished",
-        "score": 1,
-        "falls": 0,
-        "sim_seconds": 600.0,
-        "uplink_bits_used": 1000,
-        "downlink_bits_used": 1000,
-        "uplink_bits": task.uplink_bits,
-        "downlink_bits": task.downlink_bits,
-        "timeout_s": task.timeout_s,
-        "seconds_left": 0.0,
-        "started_at": started.isoformat(),
-        "finished_at": (started + timedelta(minutes=10)).isoformat(),
-        "score_events": [],
-        "logs": [
-            dict(declared, filename=name, sha256=hashlib.sha256(LOG).hexdigest())
-            for name in ("a.bin", "b.bin")
-        ],
-    }
-    db.session.commit()
-    return token, record
 
 
 def _put(master: Flask, token: dict[str, str], url: str, data: bytes) -> Any:
@@ -95,7 +47,7 @@ def test_a_refused_runs_parts_go_at_once_abandoned_ones_with_the_beat(
     master: Flask, team_a: Team
 ) -> None:
     config: Config = master.config["CLOUDSIM"]
-    token, record = _uploader(team_a)
+    token, record = uploader(team_a, LOG)
     client = master.test_client()
     base = "/api/v1/portal/ingest/runs"
     runs = {}

@@ -1,0 +1,62 @@
+"""The same run record sent twice at the same instant (an instance's retry overtaking its first
+try): the request that loses the race answers the run the other one stored, never a 500 nor a
+refusal. The race is set up without threads: the other request's run is stored (committed, in
+its own session) after this request looked for it and found nothing."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+from flask import Flask
+from sqlalchemy import func, select
+
+from cloudsim.auth.policy import SYSTEM
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.models import PortalRefusal, Run
+from cloudsim.people.service import create_team
+from cloudsim.portal import ingest
+from tests.conftest import running_app
+from tests.portal.support import uploader
+from tests.support.servers import PostgresServer
+
+URL = "/api/v1/portal/ingest/runs/7"
+_databases = itertools.count(1)
+
+
+@pytest.fixture(params=["sqlite", "postgres"])
+def master(request: pytest.FixtureRequest, make_config: Callable[..., Config]) -> Iterator[Flask]:
+    url = None
+    if request.param == "postgres":
+        server: PostgresServer = request.getfixturevalue("postgres_server")
+        url = server.create_database(f"cloudsim_portal_race_{next(_databases)}")
+    with running_app(make_config(url, portal_url="https://127.0.0.1:5443/")) as app:
+        yield app
+
+
+# finished: the twin is seen by the one-finished-run-per-task check; error: by the unique index
+@pytest.mark.parametrize("state", ["finished", "error"])
+def test_a_run_sent_twice_at_once_is_stored_once_and_both_answer_it(
+    master: Flask, state: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    team = create_team(SYSTEM, "Team A")
+    token, record = uploader(team, b"", state=state)
+    client = master.test_client()
+    first = client.put(URL, json=record, headers=token)
+    assert first.status_code == 200, first.json
+    looked, missed = ingest.uploaded_run, [None]
+
+    def late(*args: Any) -> Run | None:
+        return missed.pop() if missed else looked(*args)  # the twin arrived after the 1st look
+
+    monkeypatch.setattr(ingest, "uploaded_run", late)
+    second = client.put(URL, json=record, headers=token)
+    assert second.status_code == 200, second.json
+    assert second.json == first.json
+    monkeypatch.undo()
+    db.session.rollback()
+    assert db.session.scalar(select(func.count()).select_from(Run)) == 1
+    assert db.session.scalar(select(func.count()).select_from(PortalRefusal)) == 0
