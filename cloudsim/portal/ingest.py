@@ -4,13 +4,15 @@ A run record becomes one of the master's own runs (score events included), marke
 instance and the instance's id for it: sending it again returns the same run, never a second
 one. Its logs arrive in pieces at increasing offsets (`receive_chunk`): the bytes received so
 far are kept in a staging file, so an upload cut off halfway continues from what arrived; a
-log is stored (and listed on the run) only once its size and SHA-256 are the declared ones.
+log is stored (and listed on the run) only once its size and SHA-256 (computed as the pieces
+arrive) are the declared ones.
 What fails a check is refused with the reason (`Refused`) and the API records it.
 """
 
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import re
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -23,7 +25,7 @@ from werkzeug.exceptions import ClientDisconnected
 
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import SYSTEM
-from cloudsim.competition.artifacts import LogStore, artifact_for, file_sha256
+from cloudsim.competition.artifacts import LogStore, artifact_for
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError, Conflict, NotFound
 from cloudsim.extensions import db
@@ -33,6 +35,7 @@ from cloudsim.web.inputs import as_id
 
 TASK_KEY = re.compile(r"^m([0-9]{1,12})$")  # the master's task, as its instances name it
 PIECE = 1024 * 1024
+EMPTY_SHA256 = hashlib.sha256(b"").hexdigest()
 
 
 class Refused(CloudSimError):
@@ -204,7 +207,7 @@ def receive_run(instance: TeamInstance, remote_id: int, record_: dict[str, Any])
         if log["size"] == 0:  # no piece will ever come: stored now (its checksum checked)
             part = _staged(run, log["filename"])
             staging.open_part(part).close()
-            _store(run, log, part)
+            _store(run, log, part, EMPTY_SHA256)
     record(
         "portal.receive",
         SYSTEM,
@@ -269,27 +272,30 @@ def receive_chunk(
         received = staged.seek(0, 2)
         if offset != received:
             raise OffsetMismatch(filename, received)
+        digest = staging.running_sha256(part, staged)
         try:
             while piece := body.read(PIECE):
                 staged.write(piece)
+                digest.update(piece)
                 if staged.tell() > log["size"]:
                     break
         except ClientDisconnected:
             pass  # what arrived is kept: the next piece starts from there
         staged.flush()
         received = staged.tell()
+        if received < log["size"]:
+            staging.keep_sha256(part, staged, digest)
     if received > log["size"]:
         part.unlink()
         raise Refused(
             f"{filename}: more bytes than the {log['size']} declared", run.id, filename=filename
         )
     if received == log["size"]:
-        _store(run, log, part)
+        _store(run, log, part, digest.hexdigest())
     return log_status(run, filename)
 
 
-def _store(run: Run, log: dict[str, Any], part: Path) -> None:
-    checksum = file_sha256(part)
+def _store(run: Run, log: dict[str, Any], part: Path, checksum: str) -> None:
     if checksum != log["sha256"]:
         part.unlink()  # the instance sends it again from the start
         raise ChecksumMismatch(

@@ -6,24 +6,40 @@ here removes a locked part, so a piece under way is never cut. The parts of a ru
 upload was refused for good are removed at once (`discard_run`); a part that has not grown
 for CLOUDSIM_PORTAL_STAGING_HOURS is removed by the beat (`clean_abandoned`): an instance
 that comes back later is told the master has 0 bytes and sends that log again.
+
+A part's SHA-256 is computed as its pieces arrive (`running_sha256`, `keep_sha256`): this
+process keeps each part's running hash after its last piece, so a whole log is not read again;
+a part this process did not see last (another worker, a restart) is read once, then followed.
 """
 
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import os
+import threading
 import time
+from collections import OrderedDict
 from datetime import timedelta
 from pathlib import Path
-from typing import IO
+from typing import IO, TYPE_CHECKING
 
 from celery import shared_task
 from flask import current_app
 
 from cloudsim.config import Config
 
+if TYPE_CHECKING:
+    from hashlib import _Hash
+
 TASK = "cloudsim.portal.clean_staging"
 EVERY = timedelta(hours=1)
+HASHES_KEPT = 256  # running hashes of parts kept per process (~0.2 kB each); the rest read again
+READ = 8 * 1024 * 1024
+
+# part -> (what the part was when its hash was kept: inode, size, mtime; its running SHA-256)
+_hashes: OrderedDict[Path, tuple[tuple[int, int, int], _Hash]] = OrderedDict()
+_hashes_lock = threading.Lock()
 
 
 def root(config: Config) -> Path:
@@ -50,6 +66,36 @@ def open_part(part: Path) -> IO[bytes]:
 def removed_meanwhile(handle: IO[bytes]) -> bool:
     """Say whether a part was removed while its opener waited for the lock."""
     return os.fstat(handle.fileno()).st_nlink == 0
+
+
+def _identity(handle: IO[bytes]) -> tuple[int, int, int]:
+    """Say which bytes a part holds: a part removed and made again differs in inode or mtime."""
+    stat = os.fstat(handle.fileno())
+    return stat.st_ino, stat.st_size, stat.st_mtime_ns
+
+
+def running_sha256(part: Path, handle: IO[bytes]) -> _Hash:
+    """Return the SHA-256 state of what a part holds, its handle locked: the one kept after its
+    last piece in this process, else read from the part once."""
+    with _hashes_lock:
+        kept = _hashes.pop(part, None)
+    if kept is not None and kept[0] == _identity(handle):
+        return kept[1]
+    digest = hashlib.sha256()
+    size = _identity(handle)[1]
+    with part.open("rb") as reader:  # the locked part itself: it is only removed under the lock
+        while size > 0 and (chunk := reader.read(min(READ, size))):
+            digest.update(chunk)
+            size -= len(chunk)
+    return digest
+
+
+def keep_sha256(part: Path, handle: IO[bytes], digest: _Hash) -> None:
+    """Keep a part's running SHA-256 after a piece was written (and flushed) to it."""
+    with _hashes_lock:
+        _hashes[part] = (_identity(handle), digest)
+        while len(_hashes) > HASHES_KEPT:
+            _hashes.popitem(last=False)
 
 
 def _remove_idle(part: Path, older_than: float | None) -> bool:
