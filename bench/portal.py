@@ -3,22 +3,30 @@
 Seeds a season's teams, people and machines (bench/web.py's seed) into a fresh instance,
 starts the production stack with `cloudsim up`, uploads its 450 runs (30 teams x 15, a score
 log and a 30-minute bandwidth log each) through the portal's ingest API from 30 team
-instances at once (timed), then drives the portal's pages with 20 clients (officers and team
-users), against the anonymous login page as the reference measured in the same run.
+instances at once (timed), then a sample of runs with a simulator state log of a real run's
+size (175 MB for 30 minutes, generated; one run at a time, in 8 MiB pieces), against a local
+copy and SHA-256 of the same bytes, then drives the portal's pages with 20 clients (officers
+and team users), against the anonymous login page as the reference measured in the same run.
+Every file it made is removed at the end.
 Usage: python -m bench.portal [--db sqlite|postgresql|both] [--clients 20] [--rounds 6]
+       [--state-logs 3] [--state-minutes 30]
 """
 
 from __future__ import annotations
 
+import argparse
+import shutil
 import statistics
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from flask import Flask
 from sqlalchemy import select
 
 from bench.portal_ingest import prepare, upload
+from bench.portal_logs import StateLog, reference, state_log, upload_large
 from bench.web import (
     Visitor,
     arguments,
@@ -91,18 +99,31 @@ def in_process(app: Flask, visitors: list[Visitor], repeat: int = 5) -> dict[str
     return costs
 
 
-def measure(label: str, database_url: str | None, clients: int, rounds: int) -> None:
+def measure(args: argparse.Namespace, label: str, database_url: str | None) -> None:
     """Seed a season's people, upload its runs as team instances do, load the portal's pages."""
     instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-portal-"))
+    try:
+        with state_log(args.state_minutes) as log:
+            _measure(args, label, database_url, instance, log)
+    finally:
+        shutil.rmtree(instance)  # the stored logs with it (a state log is 175 MB)
+
+
+def _measure(
+    args: argparse.Namespace, label: str, database_url: str | None, instance: Path, log: StateLog
+) -> None:
+    clients, rounds = args.clients, args.rounds
     # the instances are stand-ins: the beat's health poll must not call them meanwhile
     env = dict(bench_env(instance, database_url), CLOUDSIM_INSTANCE_POLL_SECONDS="86400")
     started = time.perf_counter()
     seed(env, runs=0)  # teams, people, machines, jobs: the runs arrive through the portal
     seeding = time.perf_counter() - started
     app = create_app(Config.from_env(env))
-    uploaders = prepare(app, RUNS_PER_TEAM)
+    uploaders = prepare(app, RUNS_PER_TEAM, large=args.state_logs)
     with stack(env, instance) as base:  # its Redis: logging in counts attempts there
         ingest = upload(base, uploaders)
+        copies = [reference(log, instance) for _ in range(2)]
+        large = upload_large(base, uploaders, log)
         clients_of = visitors(env, clients)
         kinds = {v.email.split("@")[0].rstrip("0123456789"): v for v in clients_of}
         queries = count_queries(app, kinds)
@@ -120,14 +141,40 @@ def measure(label: str, database_url: str | None, clients: int, rounds: int) -> 
         f"{ingest['bytes'] / ingest['seconds'] / 1e6:.1f} MB/s; per run p50 "
         f"{1000 * ingest['p50']:.0f} ms, p95 {1000 * ingest['p95']:.0f} ms"
     )
-    reference = next(v for k, v in costs.items() if k.startswith("reference"))
+    _report_large(large, copies, log)
+    reference_ms = next(v for k, v in costs.items() if k.startswith("reference"))
     print("in-process, one request at a time (median of 5), against the login page:")
     for name, ms in sorted(costs.items()):
-        print(f"  {name:44} {ms:7.1f} ms {ms / reference:6.1f}x")
+        print(f"  {name:44} {ms:7.1f} ms {ms / reference_ms:6.1f}x")
+
+
+def _report_large(large: dict[str, Any], copies: list[dict[str, float]], log: StateLog) -> None:
+    """Print the large logs' ingest rate against a copy and a SHA-256 of the same bytes."""
+    if not large["runs"]:
+        return
+    mb = log.size / 1e6
+    copy = min(c["copy"] for c in copies)
+    hashed = min(c["sha256"] for c in copies)
+    rates = sorted(mb / s for s in large["seconds"])
+    total = large["runs"] * mb / sum(large["seconds"])
+    floor = mb / (copy + hashed)
+    print(
+        f"large logs: {large['runs']} runs with a {mb:.0f} MB state log (and the same small "
+        f"logs), one at a time in 8 MiB pieces: {total:.0f} MB/s "
+        f"({rates[0]:.0f}-{rates[-1]:.0f} MB/s a run, {sum(large['seconds']):.1f} s); "
+        f"reference on the same bytes: copy {mb / copy:.0f} MB/s, SHA-256 {mb / hashed:.0f} "
+        f"MB/s, both {floor:.0f} MB/s; ingest / reference {total / floor:.2f}"
+    )
 
 
 def main() -> None:
-    on_each_database(arguments(__doc__ or "", "sqlite", 6).parse_args(), measure)
+    parser = arguments(__doc__ or "", "sqlite", 6)
+    parser.add_argument(
+        "--state-logs", type=int, default=3, help="runs with a state log (one per team)"
+    )
+    parser.add_argument("--state-minutes", type=float, default=30.0, help="of simulated time")
+    args = parser.parse_args()
+    on_each_database(args, lambda label, url, _clients, _rounds: measure(args, label, url))
 
 
 if __name__ == "__main__":

@@ -44,17 +44,20 @@ class Log:
 
 @dataclass(frozen=True)
 class Uploader:
-    """One team instance: its token, its team and the tasks (id, start) it ran."""
+    """One team instance: its token, its team, the tasks (id, start, name) of its season's
+    runs, and its runs with a state log (its id for the run, the task)."""
 
     token: str
     team: str
     tasks: list[tuple[int, datetime, str]]
+    extra: list[tuple[int, tuple[int, datetime, str]]] = field(default_factory=list)
 
 
-def prepare(app: Flask, runs_per_team: int) -> list[Uploader]:
-    """Give each team an instance with an upload token and tasks of the past (committed)."""
+def prepare(app: Flask, runs_per_team: int, large: int = 0) -> list[Uploader]:
+    """Give each team an instance with an upload token and tasks of the past, the first
+    `large` teams one more task, for a run with a state log (committed)."""
     with app.app_context():
-        uploaders = []
+        uploaders: list[Uploader] = []
         now = utcnow()
         for team in db.session.scalars(select(Team).order_by(Team.id)):
             constellation = Constellation(
@@ -74,7 +77,7 @@ def prepare(app: Flask, runs_per_team: int) -> list[Uploader]:
             db.session.add(instance)
             db.session.flush()
             tasks = []
-            for n in range(runs_per_team):
+            for n in range(runs_per_team + (len(uploaders) < large)):
                 start = now - timedelta(days=2, hours=n)
                 task = Task(
                     team_id=team.id,
@@ -89,12 +92,17 @@ def prepare(app: Flask, runs_per_team: int) -> list[Uploader]:
                 db.session.add(task)
                 db.session.flush()
                 tasks.append((task.id, start, task.name))
-            uploaders.append(Uploader(upload_token(instance), team.name, tasks))
+            extra = [(runs_per_team + 1, task) for task in tasks[runs_per_team:]]
+            uploaders.append(
+                Uploader(upload_token(instance), team.name, tasks[:runs_per_team], extra)
+            )
         db.session.commit()
         return uploaders
 
 
-def _record(uploader: Uploader, task_id: int, start: datetime, name: str) -> dict[str, Any]:
+def record(uploader: Uploader, task_id: int, start: datetime, name: str) -> dict[str, Any]:
+    """Return the record an instance sends for its run of a task (no logs declared yet)."""
+
     def at(seconds: float) -> str:
         return (start + timedelta(seconds=seconds)).astimezone(UTC).isoformat()
 
@@ -133,13 +141,18 @@ def _record(uploader: Uploader, task_id: int, start: datetime, name: str) -> dic
     }
 
 
-def upload(base: str, uploaders: list[Uploader], log_seconds: int = 1800) -> dict[str, Any]:
-    """Send every run of every uploader at once; return the counts and timings."""
-    logs = [
+def small_logs(log_seconds: int = 1800) -> list[Log]:
+    """Return the logs every run carries: its score log and its bandwidth log."""
+    return [
         Log("score.jsonl", "score", score_log(CHECKPOINTS).encode()),
         Log("bandwidth.jsonl", "bandwidth", bandwidth_log(log_seconds).encode()),
     ]
-    declared = [
+
+
+def upload(base: str, uploaders: list[Uploader], log_seconds: int = 1800) -> dict[str, Any]:
+    """Send every season's run of every uploader at once; return the counts and timings."""
+    logs = small_logs(log_seconds)
+    declared: list[dict[str, Any]] = [
         {"filename": x.filename, "kind": x.kind, "size": len(x.body), "sha256": x.sha256}
         for x in logs
     ]
@@ -153,7 +166,7 @@ def upload(base: str, uploaders: list[Uploader], log_seconds: int = 1800) -> dic
         for remote_id, (task_id, start, name) in enumerate(me.tasks, 1):
             began = time.perf_counter()
             url = f"{base}{INGEST}/{remote_id}"
-            answers = [http.put(url, json={**_record(me, task_id, start, name), "logs": declared})]
+            answers = [http.put(url, json={**record(me, task_id, start, name), "logs": declared})]
             for log in logs:
                 answers.append(
                     http.put(
