@@ -110,12 +110,23 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result, indent=2))
     else:
+        target = result["target"]
+        print(
+            f"load average {result['load_average']['before']} -> {result['load_average']['after']}"
+            f"; target: {target['on']} >= {target['rtf']} with every sensor"
+        )
         for row in result["rtf"]:
+            verdict = ""
+            if row["sensors"]:
+                verdict = (
+                    f" x{row['cpu_vs_no_sensors']} cpu of no sensors"
+                    f" {'meets' if row['meets_target'] else 'MISSES'} target"
+                )
             print(
-                f"{row['world']:<11} sensors={row['sensors']!s:<5} "
-                f"balance={row['balance']:<7} rtf={row['rtf']}"
+                f"{row['world']:<11} sensors={row['sensors']!s:<5} balance={row['balance']:<7} "
+                f"cpu_rtf={row['cpu_rtf']:<6} wall_rtf={row['rtf']:<6}{verdict}"
             )
-        print(f"round trip: {result['round_trip']}")
+        print(f"target met: {target['met']}; round trip: {result['round_trip']}")
     return 0
 
 

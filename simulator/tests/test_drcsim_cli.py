@@ -35,6 +35,12 @@ def test_bench_reports_every_world_and_the_round_trip() -> None:
     assert ("vrc_task_2", True, "joints") in {
         (r["world"], r["sensors"], r["balance"]) for r in result["rtf"]
     }
+    assert all(r["cpu_rtf"] > 0 and r["rtf"] > 0 for r in result["rtf"])
+    loaded = [r for r in result["rtf"] if r["sensors"]]
+    assert all(r["cpu_vs_no_sensors"] > 0 for r in loaded)  # against the same run's reference
+    assert result["target"]["on"] == "cpu_rtf" and result["target"]["rtf"] == 1.5
+    assert result["target"]["met"] == all(r["cpu_rtf"] >= 1.5 for r in loaded)
+    assert len(result["load_average"]["before"]) == len(result["load_average"]["after"]) == 3
     assert result["round_trip"]["samples"] == 20
     assert result["round_trip"]["p99_ms"] >= result["round_trip"]["p50_ms"] > 0
 

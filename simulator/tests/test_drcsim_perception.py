@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 from drcsim.local import LocalClient
-from drcsim.protocol import check_command
-from drcsim.sensors import SensorSettings
+from drcsim.protocol import check_command, encode
+from drcsim.sensors import SensorSettings, whole_level_noise
 
 
 def test_state_is_an_estimate_from_noisy_sensors_not_ground_truth(make_sim) -> None:
@@ -74,3 +74,36 @@ def test_sensors_are_computed_only_for_subscribed_topics(make_sim) -> None:
     sim.step(200)
     assert {t for t, rng in noise.items() if rng.bit_generator.state != fresh[t]} == {"imu"}
     assert published.count("imu") == 20 and set(published) == {"clock", "score", "imu"}
+
+
+def _sensor_stream(sim) -> list[bytes]:
+    topics = {"camera", "lidar", "imu", "joint_states", "contact"}
+    messages: list[bytes] = []
+    sim.options.publish = lambda topic, message: (
+        messages.append(encode({topic: message})) if topic in topics else None
+    )  # clock and score carry the wall time
+    sim.active_topics = topics
+    sim.apply_command(check_command({"op": "behaviour", "name": "walk", "pose": [1, 0, 0]}))
+    sim.step(300)
+    return messages
+
+
+def test_sensor_messages_repeat_bit_for_bit(make_sim) -> None:
+    settings = SensorSettings(camera_width=40, camera_height=30, camera_hz=50.0, lidar_beams=181)
+    first = _sensor_stream(make_sim("vrc_task_2", "2", sensors=settings))
+    second = _sensor_stream(make_sim("vrc_task_2", "2", sensors=settings))
+    assert len(first) > 100 and first == second
+
+
+def test_camera_noise_is_gaussian_rounded_to_whole_levels(make_sim) -> None:
+    table = whole_level_noise(2.0)
+    assert abs(float(table.mean())) < 1e-3
+    assert abs(float(table.std()) - math.sqrt(4.0 + 1 / 12)) < 1e-3  # rounding adds 1/12
+    images = []
+    for noise in (0.0, 2.0):
+        settings = SensorSettings(camera_width=80, camera_height=60, camera_noise=noise)
+        message = make_sim("vrc_task_2", "1", sensors=settings).sensors.compute("camera", 0.0)
+        images.append(np.frombuffer(message["data"], dtype=np.uint8).astype(float))
+    clean, noisy = images
+    inside = (clean > 10) & (clean < 245)  # away from the clipping at 0 and 255
+    assert 1.8 < float(np.std((noisy - clean)[inside])) < 2.2
