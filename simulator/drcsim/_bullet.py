@@ -26,7 +26,7 @@ with _stdout_to_stderr():
     from pybullet_utils.bullet_client import BulletClient
 
 
-class _BoundClient(BulletClient):  # type: ignore[misc]
+class _BoundClient(BulletClient):
     """A BulletClient that binds each pybullet function to its client once, not at every call.
 
     BulletClient looks the function up and wraps it in a new partial on every attribute access
