@@ -106,7 +106,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     """Measure RTF per world with and without sensors, and the lock-step round trip."""
     from drcsim.bench import run_bench
 
-    result = run_bench(args.seconds, args.samples)
+    result = run_bench(args.seconds, args.samples, args.split)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -126,6 +126,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
                 f"{row['world']:<11} sensors={row['sensors']!s:<5} balance={row['balance']:<7} "
                 f"cpu_rtf={row['cpu_rtf']:<6} wall_rtf={row['rtf']:<6}{verdict}"
             )
+            if "cpu_ms_per_sim_s" in row:
+                print(f"    cpu ms per simulated s: {row['cpu_ms_per_sim_s']}")
         print(f"target met: {target['met']}; round trip: {result['round_trip']}")
     return 0
 
@@ -241,6 +243,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--seconds", type=float, default=5.0)
     bench.add_argument("--samples", type=int, default=2000)
     bench.add_argument("--json", action="store_true")
+    bench.add_argument(
+        "--split", action="store_true", help="also the CPU time of each part of a step"
+    )
     bench.set_defaults(func=cmd_bench)
     example = sub.add_parser("example-controller", help="run the example team controller")
     example.add_argument("--server", required=True)

@@ -26,7 +26,7 @@ def test_selftest_fails_when_the_rtf_is_below_the_minimum() -> None:
 
 
 def test_bench_reports_every_world_and_the_round_trip() -> None:
-    done = _drcsim("bench", "--json", "--seconds", "0.1", "--samples", "20")
+    done = _drcsim("bench", "--json", "--seconds", "0.1", "--samples", "20", "--split")
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
     assert {(r["world"], r["sensors"]) for r in result["rtf"]} == {
@@ -41,6 +41,9 @@ def test_bench_reports_every_world_and_the_round_trip() -> None:
     assert result["target"]["on"] == "cpu_rtf" and result["target"]["rtf"] == 1.5
     assert result["target"]["met"] == all(r["cpu_rtf"] >= 1.5 for r in loaded)
     assert len(result["load_average"]["before"]) == len(result["load_average"]["after"]) == 3
+    split = loaded[0]["cpu_ms_per_sim_s"]  # where the CPU time went, each sensor on its own
+    assert {"physics", "behaviours", "controller", "camera", "lidar", "other"} <= set(split)
+    assert split["physics"] > 0 and split["camera"] > 0
     assert result["round_trip"]["samples"] == 20
     assert result["round_trip"]["p99_ms"] >= result["round_trip"]["p50_ms"] > 0
 
