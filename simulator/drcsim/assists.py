@@ -1,9 +1,10 @@
-"""Physics assists, the same for every team: balance harness, grasp, seat, coupling, valve."""
+"""Physics assists, the same for every team: balance harness, grasp, seat, coupling."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 from drcsim._bullet import BulletClient, pybullet
 from drcsim.control import JointController
@@ -15,9 +16,7 @@ from drcsim.scene import Scene, yaw_quaternion
 HARNESS_FORCE = 6000.0  # N (and N m): enough to carry the robot, not to throw vehicles about
 GRASP_RADIUS = 0.12  # palm to object centre, metres
 GRASP_FORCE = 800.0
-VALVE_REACH = 0.3  # palm to valve centre, metres
-VALVE_SPEED = 1.0  # rad/s while turning
-CHECK_EVERY = 10  # physics steps between checks that the hand is still on the wheel
+HANDLE_REACH = 0.05  # palm to a rim or a lever's end, metres
 SEAT_FORCE = 50000.0
 GRIPPER_CLOSED = 0.04
 
@@ -63,6 +62,18 @@ def _point_distance(
     return math.dist(a[:3], b[:3])
 
 
+class Holdable(Protocol):
+    """A rim or lever a closed hand can hold (drcsim.handles.Handle)."""
+
+    name: str
+    body: int
+    joint: int
+
+    def locate(self, scene: Scene, world: Any) -> tuple[float, float]:
+        """Return the angle about the axis of `world` and its distance to the grip."""
+        ...
+
+
 class Grasps:
     """Grasp assist: closing a hand near an object fixes the object to the hand."""
 
@@ -72,6 +83,7 @@ class Grasps:
         self.controller = controller
         self.held: dict[str, tuple[int, str]] = {}
         self.hose_connected = False
+        self.handles: list[Holdable] = []
         if scene.hose is not None:
             # Hands pass through the hose so that closing on it never knocks it away.
             hands = [n for n in scene.robot_links if n[2:] in ("hand", "finger", "larm", "ufarm")]
@@ -98,6 +110,35 @@ class Grasps:
         self.controller.set_position(f"{hand[0]}_gripper", GRIPPER_CLOSED)
         if hand in self.held:
             return self.held[hand][1]
+        return self._close_on_hose(hand) or self._close_on_handle(hand)
+
+    def _close_on_handle(self, hand: str) -> str | None:
+        """Hold the rim or lever the palm is at: a point-to-point grasp joint at the palm."""
+        palm = self.palm(hand)
+        for handle in self.handles:
+            _, distance = handle.locate(self.scene, palm)
+            if distance > HANDLE_REACH or self.holding(handle.name):
+                continue
+            link_pos, link_orn = self.client.getLinkState(handle.body, handle.joint)[:2]
+            inv_pos, inv_orn = self.client.invertTransform(link_pos, link_orn)
+            pivot, _ = self.client.multiplyTransforms(inv_pos, inv_orn, palm, [0, 0, 0, 1])
+            link = self.scene.robot_links[humanoid.HAND_LINKS[hand]]
+            constraint = self.client.createConstraint(
+                self.scene.robot,
+                link,
+                handle.body,
+                handle.joint,
+                pybullet.JOINT_POINT2POINT,
+                [0, 0, 0],
+                [0, 0, 0],
+                pivot,
+            )
+            self.client.changeConstraint(constraint, maxForce=GRASP_FORCE)
+            self.held[hand] = (constraint, handle.name)
+            return handle.name
+        return None
+
+    def _close_on_hose(self, hand: str) -> str | None:
         hose = self.scene.hose
         if hose is None or self.hose_connected or any(n == "hose" for _, n in self.held.values()):
             return None
@@ -185,61 +226,6 @@ class Coupling:
         return True
 
 
-class Valve:
-    """Valve assist: with a palm on the wheel, the valve turns at a fixed rate."""
-
-    def __init__(self, scene: Scene, grasps: Grasps) -> None:
-        self.scene = scene
-        self.grasps = grasps
-        self.goal: float | None = None
-        self.hand = "left"
-        self.steps = 0
-        self.status_word = "idle"  # idle, turning, hand_off (the hand left the wheel)
-
-    def angle(self) -> float:
-        """Return how far the valve has turned (rad)."""
-        if self.scene.standpipe is None:
-            return 0.0
-        return float(self.scene.client.getJointState(self.scene.standpipe, 0)[0])
-
-    def centre(self) -> tuple[float, float, float]:
-        """Return the valve wheel's centre in world coordinates."""
-        assert self.scene.standpipe is not None
-        return tuple(self.scene.client.getLinkState(self.scene.standpipe, 0)[0])  # type: ignore[return-value]
-
-    def start(self, hand: str, angle: float) -> None:
-        """Start turning by `angle` rad; raise if the hand is not on the wheel."""
-        if self.scene.standpipe is None:
-            raise CommandError("this world has no valve")
-        if not self.hand_on(hand):
-            raise CommandError(f"the {hand} hand is not on the valve (within {VALVE_REACH} m)")
-        self.goal = self.angle() + angle
-        self.hand, self.status_word = hand, "turning"
-
-    def hand_on(self, hand: str) -> bool:
-        """Return whether `hand`'s palm is on the valve wheel."""
-        return _point_distance(self.grasps.palm(hand), self.centre()) <= VALVE_REACH
-
-    def apply(self) -> str:
-        """Drive the valve for this step; return its status."""
-        if self.scene.standpipe is None:
-            return "none"
-        client = self.scene.client
-        self.steps += 1
-        if self.goal is not None and self.angle() >= self.goal:
-            self.goal, self.status_word = None, "idle"
-        # The assist acts only while its condition holds: a hand that leaves the wheel stops it.
-        if self.goal is not None and self.steps % CHECK_EVERY == 0 and not self.hand_on(self.hand):
-            self.goal, self.status_word = None, "hand_off"
-        if self.goal is not None:
-            self.status_word = "turning"
-        velocity, force = (VALVE_SPEED, 80.0) if self.goal is not None else (0.0, 0.5)
-        client.setJointMotorControl2(
-            self.scene.standpipe, 0, pybullet.VELOCITY_CONTROL, targetVelocity=velocity, force=force
-        )
-        return self.status_word
-
-
 class Seat:
     """Seat assist: moves the robot into or out of the driver seat when it is close enough."""
 
@@ -302,12 +288,17 @@ class Seat:
         )
         client.changeConstraint(self.constraint, maxForce=SEAT_FORCE)
 
-    def exit(self) -> tuple[float, float, float]:
-        """Stand the robot beside the driver door; return its (x, y, yaw)."""
+    def check_exit(self) -> None:
+        """Raise CommandError unless the robot may get out now."""
         if self.drive is None or self.constraint is None:
             raise CommandError("the robot is not in the vehicle")
         if self.drive.speed() > 0.5:
             raise CommandError("the vehicle is moving")
+
+    def exit(self) -> tuple[float, float, float]:
+        """Stand the robot beside the driver door; return its (x, y, yaw)."""
+        self.check_exit()
+        assert self.constraint is not None
         client = self.scene.client
         client.removeConstraint(self.constraint)
         self.constraint = None

@@ -7,14 +7,16 @@ from typing import Any
 
 import numpy as np
 
-from drcsim.assists import Coupling, Grasps, Harness, Seat, Valve
+from drcsim.assists import Coupling, Grasps, Harness, Seat
 from drcsim.control import JointController
+from drcsim.driver import DriverLimbs
 from drcsim.driving import VehicleDrive
 from drcsim.errors import CommandError
 from drcsim.gait import GaitParameters, wrap_angle
 from drcsim.models import humanoid
 from drcsim.reach import ARM_JOINTS, REACH_EVERY, Reach
 from drcsim.scene import Scene
+from drcsim.valve import Valve
 from drcsim.walker import Walker
 
 GAIT_KEYS = ("step_length", "step_height", "step_time", "double_support", "stance_width")
@@ -45,7 +47,8 @@ class Behaviours:
         self.harness = Harness(self.client, scene.robot)
         self.grasps = Grasps(scene, controller)
         self.seat = Seat(scene, controller, drive)
-        self.valve = Valve(scene, self.grasps)
+        self.valve = Valve(scene, controller, self.grasps)
+        self.driver = DriverLimbs(scene, controller, self.grasps, drive)
         self.coupling = Coupling(
             scene,
             self.grasps,
@@ -81,7 +84,7 @@ class Behaviours:
         for side, reach in self.reaches.items():
             if joint in ARM_JOINTS[side]:
                 return f"reach ({reach.side} hand)"
-        return None
+        return self.valve.owner(joint) or self.driver.owner(joint)
 
     def check_free(self, joints: list[str]) -> None:
         """Raise CommandError naming every joint in `joints` that a behaviour owns."""
@@ -121,6 +124,7 @@ class Behaviours:
             )
         elif name == "reach":
             side = params["hand"]
+            self._free_arm(side)
             self.reaches[side] = Reach(
                 self.scene,
                 self.controller,
@@ -132,6 +136,7 @@ class Behaviours:
             )
         elif name == "arm_rest":
             self.reaches.pop(params["hand"], None)
+            self._free_arm(params["hand"])
             posture = humanoid.SIT_POSTURE if self.seat.seated else humanoid.STAND_POSTURE
             self.controller.set_positions(
                 {j: posture.get(j, 0.0) for j in ARM_JOINTS[params["hand"]]}
@@ -139,6 +144,7 @@ class Behaviours:
         elif name == "grasp":
             return {"grasped": self.grasps.close(params["hand"])}
         elif name == "release":
+            self._free_arm(params["hand"])
             self.grasps.open(params["hand"])
         elif name == "enter_vehicle":
             self.seat.enter()
@@ -146,13 +152,16 @@ class Behaviours:
             self.harness.release()
             self.reaches.clear()
         elif name == "exit_vehicle":
+            self.seat.check_exit()
+            self.driver.stop()
             x, y, yaw = self.seat.exit()
             self.pose_cmd = [x, y, yaw]
             self.mode, self.walk_status = "stand", "idle"
         elif name == "drive":
             if not self.seat.seated or self.drive is None:
                 raise CommandError("drive needs the robot in the driver seat")
-            self.drive.set_interfaces(
+            self.reaches.clear()
+            self.driver.set_targets(
                 float(params.get("steering_wheel", 0.0)),
                 float(params.get("throttle", 0.0)),
                 float(params.get("brake", 0.0)),
@@ -160,10 +169,16 @@ class Behaviours:
                 str(params.get("direction", "neutral")),
             )
         elif name == "turn_valve":
+            self.reaches.pop(params["hand"], None)
             self.valve.start(params["hand"], float(params.get("angle", 2 * math.pi)))
         else:
             raise CommandError(f"unknown behaviour {name!r}")
         return {}
+
+    def _free_arm(self, side: str) -> None:
+        """Stop the valve or driving behaviour that uses this arm (its hand lets go)."""
+        self.valve.cancel(side)
+        self.driver.stop(side)
 
     def _use_harness_balance(self) -> None:
         if self.walker is not None and self.balance == "joints":
@@ -230,7 +245,8 @@ class Behaviours:
             if self.steps % REACH_EVERY == 0:
                 reach.update()
             reach.apply()
-        self.valve.apply()
+        self.valve.apply(self.steps)
+        self.driver.apply(self.steps)
         if self.drive is not None:
             self.drive.apply()
 
@@ -335,4 +351,5 @@ class Behaviours:
             "seated": self.seat.seated,
             "hose_connected": self.grasps.hose_connected,
             "valve": self.valve.status_word,
+            "drive": self.driver.status(),
         }

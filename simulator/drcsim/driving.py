@@ -20,33 +20,28 @@ from drcsim.models.vehicle import (
 )
 
 ROLLING_RESISTANCE = 5.0  # N m per wheel
-INTERFACE_FORCE = 200.0  # what the seated robot's limbs can exert on an interface
+INTERFACE_FORCE = 200.0  # what the seated robot's foot exerts on a pedal (not yet its leg)
+PEDALS = ("throttle_pedal", "brake_pedal")
 DIRECTIONS = {"forward": 0.3, "neutral": 0.0, "reverse": -0.3}
 
 
 class VehicleDrive:
-    """Moves the interfaces towards the driver's targets and the wheels from the interfaces."""
+    """Moves the pedals towards the driver's targets and the wheels from the interfaces."""
 
     def __init__(self, client: BulletClient, body: int, joints: dict[str, int]) -> None:
         self.client = client
         self.body = body
         self.joints = joints
-        self.interface_target = {name: 0.0 for name in INTERFACES}
+        self.interface_target = {name: 0.0 for name in PEDALS}
 
-    def set_interfaces(
-        self, steering_wheel: float, throttle: float, brake: float, hand_brake: bool, direction: str
-    ) -> None:
-        """Set where the driver's limbs put each interface (fractions are 0..1)."""
-        travel = {name: (i.lower, i.upper) for name, i in INTERFACES.items()}
-        self.interface_target["steering_wheel"] = min(
-            max(steering_wheel, travel["steering_wheel"][0]), travel["steering_wheel"][1]
-        )
+    def set_pedals(self, throttle: float, brake: float) -> None:
+        """Set where the driver's foot puts the pedals (fractions 0..1)."""
         self.interface_target["throttle_pedal"] = (
-            min(max(throttle, 0.0), 1.0) * travel["throttle_pedal"][1]
+            min(max(throttle, 0.0), 1.0) * INTERFACES["throttle_pedal"].upper
         )
-        self.interface_target["brake_pedal"] = min(max(brake, 0.0), 1.0) * travel["brake_pedal"][1]
-        self.interface_target["hand_brake"] = travel["hand_brake"][1] if hand_brake else 0.0
-        self.interface_target["fnr_switch"] = DIRECTIONS[direction]
+        self.interface_target["brake_pedal"] = (
+            min(max(brake, 0.0), 1.0) * INTERFACES["brake_pedal"].upper
+        )
 
     def interface_positions(self) -> dict[str, float]:
         """Return where each interface actually is."""
@@ -55,8 +50,8 @@ class VehicleDrive:
         return {name: state[0] for name, state in zip(INTERFACES, states, strict=True)}
 
     def apply(self) -> None:
-        """Drive the interfaces towards their targets and the wheels from the interfaces."""
-        names = list(INTERFACES)
+        """Drive the pedals towards their targets and the wheels from the interfaces."""
+        names = list(PEDALS)
         self.client.setJointMotorControlArray(
             self.body,
             [self.joints[n] for n in names],

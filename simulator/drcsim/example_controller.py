@@ -235,4 +235,4 @@ class ExampleController:
         self.walk(*near(valve, -0.5, -0.3), pipe_yaw)
         self.reach("left", [*near(valve, -0.12, 0.0), valve[2]])
         self.client.behaviour("turn_valve", hand="left", angle=3.5)
-        self.until(lambda s: s["behaviour"]["valve"] != "turning", 10.0)
+        self.until(lambda s: s["behaviour"]["valve"] != "turning", 30.0)

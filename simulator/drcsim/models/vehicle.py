@@ -29,8 +29,8 @@ INTERFACES: dict[str, Interface] = {
     "steering_wheel": Interface("steering_wheel", -3.0, 3.0, (0.35, 0.3, 0.45), (1, 0, 0)),
     "throttle_pedal": Interface("throttle_pedal", 0.0, 0.35, (0.8, 0.2, 0.15), (0, 1, 0)),
     "brake_pedal": Interface("brake_pedal", 0.0, 0.35, (0.8, 0.38, 0.15), (0, 1, 0)),
-    "hand_brake": Interface("hand_brake", 0.0, 0.6, (0.2, 0.05, 0.2), (0, 1, 0)),
-    "fnr_switch": Interface("fnr_switch", -0.3, 0.3, (0.45, 0.0, 0.3), (0, 1, 0)),
+    "hand_brake": Interface("hand_brake", 0.0, 0.6, (0.05, 0.05, 0.25), (0, 1, 0)),
+    "fnr_switch": Interface("fnr_switch", -0.3, 0.3, (0.3, 0.05, 0.4), (0, 1, 0)),
 }
 STEERING_RATIO = 5.0  # steering wheel radians per road-wheel radian
 MAX_STEER = 0.6
