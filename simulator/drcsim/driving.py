@@ -13,6 +13,7 @@ from drcsim.models.vehicle import (
     INTERFACES,
     MAX_SPEED,
     MAX_STEER,
+    PEDALS,
     STEER_JOINTS,
     STEERING_RATIO,
     WHEEL_RADIUS,
@@ -20,27 +21,21 @@ from drcsim.models.vehicle import (
 )
 
 ROLLING_RESISTANCE = 5.0  # N m per wheel
-INTERFACE_FORCE = 200.0  # what the seated robot's foot exerts on a pedal (not yet its leg)
-PEDALS = ("throttle_pedal", "brake_pedal")
+PEDAL_SPRING = 10.0  # N m/rad: the pedals' return springs
+PEDAL_PRELOAD = 1.5  # N m holding a released pedal up
 DIRECTIONS = {"forward": 0.3, "neutral": 0.0, "reverse": -0.3}
 
 
 class VehicleDrive:
-    """Moves the pedals towards the driver's targets and the wheels from the interfaces."""
+    """Springs the pedals back and turns the wheels from the interfaces' positions."""
 
     def __init__(self, client: BulletClient, body: int, joints: dict[str, int]) -> None:
         self.client = client
         self.body = body
         self.joints = joints
-        self.interface_target = {name: 0.0 for name in PEDALS}
-
-    def set_pedals(self, throttle: float, brake: float) -> None:
-        """Set where the driver's foot puts the pedals (fractions 0..1)."""
-        self.interface_target["throttle_pedal"] = (
-            min(max(throttle, 0.0), 1.0) * INTERFACES["throttle_pedal"].upper
-        )
-        self.interface_target["brake_pedal"] = (
-            min(max(brake, 0.0), 1.0) * INTERFACES["brake_pedal"].upper
+        # The pedals are sprung: only a foot pressing on them moves them.
+        client.setJointMotorControlArray(
+            body, [joints[n] for n in PEDALS], pybullet.VELOCITY_CONTROL, forces=[0.0, 0.0]
         )
 
     def interface_positions(self) -> dict[str, float]:
@@ -50,16 +45,15 @@ class VehicleDrive:
         return {name: state[0] for name, state in zip(INTERFACES, states, strict=True)}
 
     def apply(self) -> None:
-        """Drive the pedals towards their targets and the wheels from the interfaces."""
-        names = list(PEDALS)
-        self.client.setJointMotorControlArray(
-            self.body,
-            [self.joints[n] for n in names],
-            pybullet.POSITION_CONTROL,
-            targetPositions=[self.interface_target[n] for n in names],
-            forces=[INTERFACE_FORCE] * len(names),
-        )
+        """Spring the pedals back and drive the wheels from where the interfaces are."""
         pos = self.interface_positions()
+        for pedal in PEDALS:
+            self.client.setJointMotorControl2(
+                self.body,
+                self.joints[pedal],
+                pybullet.TORQUE_CONTROL,
+                force=-(PEDAL_SPRING * pos[pedal] + PEDAL_PRELOAD),
+            )
         throttle = pos["throttle_pedal"] / INTERFACES["throttle_pedal"].upper
         brake = pos["brake_pedal"] / INTERFACES["brake_pedal"].upper
         hand_brake = pos["hand_brake"] > 0.5 * INTERFACES["hand_brake"].upper

@@ -27,11 +27,14 @@ class Interface:
 
 INTERFACES: dict[str, Interface] = {
     "steering_wheel": Interface("steering_wheel", -3.0, 3.0, (0.35, 0.3, 0.45), (1, 0, 0)),
-    "throttle_pedal": Interface("throttle_pedal", 0.0, 0.35, (0.8, 0.2, 0.15), (0, 1, 0)),
-    "brake_pedal": Interface("brake_pedal", 0.0, 0.35, (0.8, 0.38, 0.15), (0, 1, 0)),
+    "throttle_pedal": Interface("throttle_pedal", 0.0, 0.35, (0.44, 0.21, -0.12), (0, 1, 0)),
+    "brake_pedal": Interface("brake_pedal", 0.0, 0.35, (0.44, 0.39, -0.12), (0, 1, 0)),
     "hand_brake": Interface("hand_brake", 0.0, 0.6, (0.05, 0.05, 0.25), (0, 1, 0)),
     "fnr_switch": Interface("fnr_switch", -0.3, 0.3, (0.3, 0.05, 0.4), (0, 1, 0)),
 }
+PEDALS = ("throttle_pedal", "brake_pedal")
+PEDAL_HEIGHT = 0.12  # the pedal plate, up from its pivot
+PEDAL_TILT = math.pi / 4  # the plate leans forward this far from upright at rest
 STEERING_RATIO = 5.0  # steering wheel radians per road-wheel radian
 MAX_STEER = 0.6
 MAX_SPEED = 6.0  # m/s at full throttle
@@ -101,9 +104,23 @@ def build_vehicle() -> Robot:
         shape = (
             cylinder(0.18, 0.03, rpy=(0, HALF_PI, 0))
             if interface.joint == "steering_wheel"
+            else box(
+                0.04,
+                0.08,
+                PEDAL_HEIGHT,
+                xyz=(
+                    math.sin(PEDAL_TILT) * PEDAL_HEIGHT / 2,
+                    0,
+                    math.cos(PEDAL_TILT) * PEDAL_HEIGHT / 2,
+                ),
+                rpy=(0, PEDAL_TILT, 0),
+            )
+            if interface.joint in PEDALS
             else box(0.04, 0.08, 0.12, xyz=(0, 0, 0.06))
         )
-        link = Link(interface.joint, 0.5, [shape], rgba=TRIM, collide=False)
+        # The driver's feet press the pedals (contact); the hands hold the rest (grasp joints).
+        pedal = interface.joint in PEDALS
+        link = Link(interface.joint, 0.5, [shape], rgba=TRIM, collide=pedal)
         robot.add(
             link,
             Joint(
