@@ -65,9 +65,20 @@ def _point_distance(
 class Holdable(Protocol):
     """A rim or lever a closed hand can hold (drcsim.handles.Handle)."""
 
-    name: str
-    body: int
-    joint: int
+    @property
+    def name(self) -> str:
+        """Return the handle's name (what `grasp` reports)."""
+        ...
+
+    @property
+    def body(self) -> int:
+        """Return the body the handle belongs to."""
+        ...
+
+    @property
+    def joint(self) -> int:
+        """Return the handle's joint (and link) index."""
+        ...
 
     def locate(self, scene: Scene, world: Any) -> tuple[float, float]:
         """Return the angle about the axis of `world` and its distance to the grip."""
