@@ -1,7 +1,9 @@
 """Two real team instances (local hosts, each its own CloudSim) each finish a run on the
 constellation launched through them; both runs and their logs reach the master's portal
 (its web server over pinned HTTPS, reached from the public network through a relay at the
-network's gateway) and the leaderboard ranks the two teams."""
+network's gateway) and the leaderboard ranks the two teams by the VRC rules: Team A's run,
+of a world whose first checkpoint an admin made one the robot holds from its first step,
+scores it; Team B's scores nothing."""
 
 from __future__ import annotations
 
@@ -73,8 +75,18 @@ def test_two_instances_runs_reach_the_portal_and_are_ranked(
     config = constellations_config
     port = int(config.portal_url.rsplit(":", 1)[1].strip("/"))
     teams = [create_team(SYSTEM, "Team A"), create_team(SYSTEM, "Team B")]
-    tasks = [open_task(team.id, name="Walking", timeout_s=20).id for team in teams]
     admin, officer = token_for(make_user(Role.ADMIN)), token_for(make_user(Role.OFFICER))
+    client = constellations_app.test_client()
+    # vrc_task_1's first checkpoint, as an admin edits it: outside the vehicle, from the start
+    # (the instances get the world with their first sync; the second checkpoint needs driving)
+    world = client.get("/api/v1/worlds/vrc_task_1", headers=admin).get_json()["document"]
+    world["checkpoints"][0] = {"name": "by the vehicle", "when": {"not_flag": "robot_seated"}}
+    edited = client.put("/api/v1/worlds/vrc_task_1", json={"document": world}, headers=admin)
+    assert edited.status_code == 200 and edited.get_json()["changed"], edited.get_json()
+    tasks = [
+        open_task(team.id, name="Season run", world=world_name, timeout_s=20).id
+        for team, world_name in zip(teams, ("vrc_task_1", "vrc_task_2"), strict=True)
+    ]
     write_certificate(config, config.instance_dir / "tls")  # before the syncs: they hand it on
     server = MasterServer(config, port, pytestconfig.rootpath)
     server.start()
@@ -89,7 +101,6 @@ def test_two_instances_runs_reach_the_portal_and_are_ranked(
         instances = cast(list[TeamInstance], wait_for(lambda: ready(config), 120, "ready"))
         driver = open_provider("local", config).driver
         login = make_key_pair("inventory")
-        client = constellations_app.test_client()
         for instance in instances:  # a bare server each, kept as the instance's inventory
             lan = driver.ex_create_network(f"bare-{instance.name}")
             node = driver.create_node(
@@ -129,7 +140,7 @@ def test_two_instances_runs_reach_the_portal_and_are_ranked(
             remote_runs = {}
             for instance in instances:  # the master's task, as the instance has it
                 (task,) = [
-                    t for t in on_instance(instance, config, "/tasks") if t["name"] == "Walking"
+                    t for t in on_instance(instance, config, "/tasks") if t["name"] == "Season run"
                 ]
                 run = on_instance(
                     instance, config, f"/tasks/{task['id']}/runs", method="POST", body={}
@@ -163,8 +174,16 @@ def test_two_instances_runs_reach_the_portal_and_are_ranked(
                 theirs["state"],
                 theirs["end_reason"],
             )
+        by_team = {run.team_id: run for run in runs}
+        run_a, run_b = by_team[teams[0].id], by_team[teams[1].id]
+        assert (run_a.score, run_b.score) == (1, 0)
+        assert [(e.checkpoint, e.description) for e in run_a.score_events if e.checkpoint] == [
+            (1, "by the vehicle")
+        ]
         board = client.get("/api/v1/leaderboard", headers=officer).get_json()
-        assert sorted(s["team"] for s in board) == ["Team A", "Team B"]
-        assert sorted(s["rank"] for s in board) in ([1, 2], [1, 1])
+        assert [(s["rank"], s["team"], s["checkpoints"]) for s in board] == [
+            (1, "Team A", 1),
+            (2, "Team B", 0),
+        ]
     finally:
         server.kill()
