@@ -104,16 +104,22 @@ def _columns() -> Select[Any]:
     )
 
 
-def results(actor: Actor, team_id: int | None = None) -> list[ResultRow]:
-    """Return the runs the actor may see (one team's if given), by team then start time."""
-    # Columns, not rows: a season's 450 runs are read without building an ORM object each.
-    query = _columns().order_by(Team.name, Run.started_at, Run.id)
+def _visible(query: Select[Any], actor: Actor, team_id: int | None = None) -> Select[Any]:
+    """Keep the runs (joined with their team) the actor may see, one team's if given, by team
+    then start time."""
+    query = query.order_by(Team.name, Run.started_at, Run.id)
     if not actor.has_role(Role.OFFICER):
         query = query.where(Run.team_id == actor.team_id, Run.team_id.is_not(None))
     if team_id is not None:
         query = query.where(Run.team_id == team_id)
+    return query
+
+
+def results(actor: Actor, team_id: int | None = None) -> list[ResultRow]:
+    """Return the runs the actor may see (one team's if given), by team then start time."""
+    # Columns, not rows: a season's 450 runs are read without building an ORM object each.
     rows = []
-    for row in db.session.execute(query):
+    for row in db.session.execute(_visible(_columns(), actor, team_id)):
         values = row._asdict()
         values["state"] = values["state"].value
         uploaded = values.pop("remote_run_id") is not None
@@ -121,6 +127,14 @@ def results(actor: Actor, team_id: int | None = None) -> list[ResultRow]:
         values["invalidated"] = values.pop("invalidated_at") is not None
         rows.append(ResultRow(**values))
     return rows
+
+
+def scoring_run_ids(actor: Actor) -> Select[Any]:
+    """Return the query of the ids of the runs that count (`ResultRow.scoring`: finished, not
+    invalidated) the actor may see, in `results`' order (for paging them)."""
+    query = select(Run.id).join(Team, Run.team_id == Team.id)
+    query = query.where(Run.state == RunState.FINISHED, Run.invalidated_at.is_(None))
+    return _visible(query, actor)
 
 
 def team_cloudsims(team_ids: list[int] | None = None) -> dict[int, TeamInstance]:

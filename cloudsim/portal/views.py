@@ -19,11 +19,13 @@ from cloudsim.errors import NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Artifact, Role, Team
 from cloudsim.portal import charts, figures
-from cloudsim.portal.results import FIELDS, ResultRow, results, team_cloudsims
+from cloudsim.portal.results import FIELDS, ResultRow, results, scoring_run_ids, team_cloudsims
 from cloudsim.web.downloads import attachment
+from cloudsim.web.inputs import query_int
 
 bp = Blueprint("portal", __name__)
 CSV = "text/csv"
+FIGURE_RUNS_PAGE = 50  # the figures page lists a season's ~450 scoring runs a page at a time
 
 
 @bp.route("/portal")
@@ -92,6 +94,13 @@ def figure_page() -> ResponseReturnValue:
     rows = results(current_user)
     banked = figures.bits_banked(rows)
     used = figures.uplink_against_score(rows)
+    page = db.paginate(
+        scoring_run_ids(current_user),
+        page=query_int("page", 1, minimum=1),
+        per_page=FIGURE_RUNS_PAGE,
+        error_out=False,
+    )
+    listed = set(page.items)
     return render_template(
         "portal/figures.html",
         banked=charts.team_lines(
@@ -107,7 +116,8 @@ def figure_page() -> ResponseReturnValue:
             x_label="uplink bits used (log scale); dotted: the caps",
             y_label="score (checkpoints)",
         ),
-        runs=[r for r in rows if r.scoring],
+        runs=[r for r in rows if r.run_id in listed],
+        page=page,
     )
 
 

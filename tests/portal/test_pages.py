@@ -5,12 +5,16 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 from pathlib import Path
 
+import pytest
 from flask import Flask
+from flask.testing import FlaskClient
 
 from cloudsim.extensions import db
 from cloudsim.models import RunState, User, utcnow
+from cloudsim.portal import views
 from tests.conftest import log_in
 from tests.portal.support import scored_run, team_instance
 
@@ -108,3 +112,37 @@ def test_officers_export_every_run_of_the_season(
     assert [int(r["run_id"]) for r in csv.DictReader(io.StringIO(text))] == [runs[1].id]
     page = client.get(f"/portal/teams/{user_a.team_id}").get_data(as_text=True)
     assert "ran the wrong world" in page and "checked with the team" in page
+
+
+def test_the_figures_page_lists_the_scoring_runs_a_page_at_a_time(
+    app: Flask, people: dict[str, User | None], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    user_a, user_b, officer = people["user_a"], people["user_b"], people["officer"]
+    assert user_a is not None and user_b is not None and officer is not None
+    monkeypatch.setattr(views, "FIGURE_RUNS_PAGE", 2)
+    scoring = [
+        scored_run(team, tmp_path, checkpoints=1, uplink_bytes=100)
+        for team in (user_a.team_id or 0, user_b.team_id or 0, user_b.team_id or 0)
+    ]
+    scored_run(user_b.team_id or 0, tmp_path, checkpoints=0, uplink_bytes=1, state=RunState.ERROR)
+    client, theirs = app.test_client(), app.test_client()
+    log_in(client, officer)
+    log_in(theirs, user_a)
+
+    def listed(url: str, by: FlaskClient = client) -> tuple[list[int], str]:
+        page = by.get(url).get_data(as_text=True)
+        table = page.split('id="bandwidth-runs"')[1].split("</table>")[0]
+        return [int(n) for n in re.findall(r'href="/runs/(\d+)"', table)], page
+
+    first, page = listed("/portal/figures")
+    assert first == [r.id for r in scoring[:2]] and "page 1 of 2" in page
+    assert 'href="/portal/figures?page=2"' in page
+    second, page = listed("/portal/figures?page=2")
+    assert second == [scoring[2].id] and 'href="/portal/figures?page=1"' in page
+    assert listed("/portal/figures?page=9")[0] == []  # past the end: an empty page, not a 404
+    assert listed("/portal/figures?page=x")[0] == first  # junk: the first page
+    # the figures themselves still draw every scoring run, whatever the page
+    csv_rows = client.get("/portal/figures/uplink-score.csv").get_data(as_text=True)
+    assert len(list(csv.DictReader(io.StringIO(csv_rows)))) == 3
+    own, page = listed("/portal/figures", theirs)  # a team user: its own runs only
+    assert own == [scoring[0].id] and "page 1 of" not in page
