@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
+import shutil
 import ssl
 import sys
 import tempfile
@@ -279,6 +280,7 @@ def main() -> None:
         real = None if only_stand_ins else real_instances(folder, redis)
     finally:
         redis.stop()
+        shutil.rmtree(folder, ignore_errors=True)
     print("team instances benchmark")
     if real is not None:
         deploy, converged, reconcile = real

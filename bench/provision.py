@@ -8,6 +8,7 @@ installation builds it once and caches it). Usage: python -m bench.provision
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 import time
 from datetime import datetime
@@ -104,6 +105,7 @@ def main() -> None:
             # whatever a failed run left behind
             open_provider("local", app.config["CLOUDSIM"]).driver.ex_sweep()  # type: ignore[attr-defined]
         redis.stop()
+        shutil.rmtree(instance, ignore_errors=True)
     print("provisioning benchmark (local provider, vrc = router + sim + fc1 + fc2)")
     print(f"  wheelhouse build (once, cached)        {wheelhouse:6.1f} s")
     print(f"  image layers (once, until no host)     {layers:6.1f} s")

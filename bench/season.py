@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import statistics
 import tempfile
 import threading
@@ -249,6 +250,7 @@ def main() -> None:
     finally:
         with create_app(config).app_context():
             leaked = open_provider("local", config).driver.ex_sweep()  # type: ignore[attr-defined]
+        shutil.rmtree(instance, ignore_errors=True)  # its wheelhouse and logs
     report(args, wheelhouse, figures)
     if leaked:
         print(f"  LEFT BEHIND (swept): {leaked}")

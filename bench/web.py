@@ -14,6 +14,7 @@ import argparse
 import os
 import random
 import re
+import shutil
 import signal
 import socket
 import statistics
@@ -318,27 +319,31 @@ def bench_env(instance: Path, database_url: str | None) -> dict[str, str]:
 def measure(label: str, database_url: str | None, clients: int, rounds: int) -> None:
     """Seed a season on one database, load it, print the table."""
     instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-"))
-    env = bench_env(instance, database_url)
-    started = time.perf_counter()
-    seed(env)
-    seeding = time.perf_counter() - started
-    app = create_app(Config.from_env(env))
-    visitors = season_visitors(app)
-    kinds = [visitors[KINDS[n % 3]] for n in range(clients)]
-    with stack(env, instance) as base:
-        queries = count_queries(app, visitors)
-        stack_floor(base, [kinds[n].email for n in range(clients)])
-        started, machine, own = time.perf_counter(), busy_cpu_seconds(), time.process_time()
-        timings = drive(base, {}, clients, rounds, lambda number: kinds[number])
-        wall = time.perf_counter() - started
-        machine, own = busy_cpu_seconds() - machine, time.process_time() - own
-    config = app.config["CLOUDSIM"]
-    server = f"gunicorn {config.web_workers} workers x {config.web_threads} threads"
-    report(label, seeded(app), seeding, timings, queries, wall, clients, server)
-    print(
-        f"CPU while driving: the machine's {os.cpu_count()} cores {machine / wall:.2f} cores busy "
-        f"(everything, other users included), the clients' own process {own / wall:.2f} cores"
-    )
+    try:
+        env = bench_env(instance, database_url)
+        started = time.perf_counter()
+        seed(env)
+        seeding = time.perf_counter() - started
+        app = create_app(Config.from_env(env))
+        visitors = season_visitors(app)
+        kinds = [visitors[KINDS[n % 3]] for n in range(clients)]
+        with stack(env, instance) as base:
+            queries = count_queries(app, visitors)
+            stack_floor(base, [kinds[n].email for n in range(clients)])
+            started, machine, own = time.perf_counter(), busy_cpu_seconds(), time.process_time()
+            timings = drive(base, {}, clients, rounds, lambda number: kinds[number])
+            wall = time.perf_counter() - started
+            machine, own = busy_cpu_seconds() - machine, time.process_time() - own
+        config = app.config["CLOUDSIM"]
+        server = f"gunicorn {config.web_workers} workers x {config.web_threads} threads"
+        report(label, seeded(app), seeding, timings, queries, wall, clients, server)
+        print(
+            f"CPU while driving: the machine's {os.cpu_count()} cores {machine / wall:.2f} cores "
+            "busy (everything, other users included), the clients' own process "
+            f"{own / wall:.2f} cores"
+        )
+    finally:
+        shutil.rmtree(instance, ignore_errors=True)
 
 
 def stack_floor(base: str, emails: list[str], rounds: int = 100) -> None:
