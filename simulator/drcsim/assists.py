@@ -14,9 +14,11 @@ from drcsim.models import humanoid, props, vehicle
 from drcsim.scene import Scene, yaw_quaternion
 
 HARNESS_FORCE = 6000.0  # N (and N m): enough to carry the robot, not to throw vehicles about
-GRASP_RADIUS = 0.12  # palm to object centre, metres
 GRASP_FORCE = 800.0
-HANDLE_REACH = 0.05  # palm to a rim or a lever's end, metres
+HANDLE_REACH = 0.05  # palm to a rim, a lever's end or the coupler's axis, metres
+# The middle of the coupler's 0.16 m sleeve a palm may be at: within HANDLE_REACH of it, the
+# hand is around the sleeve and never beyond its ends.
+COUPLER_GRIP = 0.03
 SEAT_FORCE = 50000.0
 GRIPPER_CLOSED = 0.04
 
@@ -63,7 +65,7 @@ def _point_distance(
 
 
 class Holdable(Protocol):
-    """A rim or lever a closed hand can hold (drcsim.handles.Handle)."""
+    """A rim, lever or sleeve a closed hand can hold (drcsim.handles.Handle, Sleeve)."""
 
     @property
     def name(self) -> str:
@@ -80,13 +82,37 @@ class Holdable(Protocol):
         """Return the handle's joint (and link) index."""
         ...
 
+    @property
+    def carried(self) -> bool:
+        """Return whether the hand carries it rigidly (a free object) or pivots on it."""
+        ...
+
     def locate(self, scene: Scene, world: Any) -> tuple[float, float]:
-        """Return the angle about the axis of `world` and its distance to the grip."""
+        """Return where along the grip `world` is and its distance to the grip."""
         ...
 
 
+@dataclass(frozen=True)
+class Sleeve:
+    """A free object's straight grip (the hose's coupler): held along its axis's middle."""
+
+    name: str
+    body: int
+    half_length: float  # of the stretch of the axis (link +x) the palm may be at
+    joint: int = -1  # the base link
+    carried: bool = True
+
+    def locate(self, scene: Scene, world: Any) -> tuple[float, float]:
+        """Return how far along the axis `world` is and its distance to the grip's stretch."""
+        client = scene.client
+        inv_pos, inv_orn = client.invertTransform(*client.getBasePositionAndOrientation(self.body))
+        local, _ = client.multiplyTransforms(inv_pos, inv_orn, list(world), [0, 0, 0, 1])
+        along = max(-self.half_length, min(self.half_length, local[0]))
+        return along, math.dist(local, (along, 0.0, 0.0))
+
+
 class Grasps:
-    """Grasp assist: closing a hand near an object fixes the object to the hand."""
+    """Grasp assist: closing a hand around a holdable grip joins it to the hand."""
 
     def __init__(self, scene: Scene, controller: JointController) -> None:
         self.scene = scene
@@ -96,7 +122,9 @@ class Grasps:
         self.hose_connected = False
         self.handles: list[Holdable] = []
         if scene.hose is not None:
-            # Hands pass through the hose so that closing on it never knocks it away.
+            self.handles.append(Sleeve("hose", scene.hose, COUPLER_GRIP))
+            # Hands pass through the hose so that closing on it never knocks it away (the
+            # fingers do not wrap around it, as on the rims).
             hands = [n for n in scene.robot_links if n[2:] in ("hand", "finger", "larm", "ufarm")]
             self._ignore_collisions(scene.hose, [scene.robot_links[n] for n in hands])
             if scene.standpipe is not None:
@@ -121,60 +149,38 @@ class Grasps:
         self.controller.set_position(f"{hand[0]}_gripper", GRIPPER_CLOSED)
         if hand in self.held:
             return self.held[hand][1]
-        return self._close_on_hose(hand) or self._close_on_handle(hand)
-
-    def _close_on_handle(self, hand: str) -> str | None:
-        """Hold the rim or lever the palm is at: a point-to-point grasp joint at the palm."""
         palm = self.palm(hand)
         for handle in self.handles:
             _, distance = handle.locate(self.scene, palm)
-            if distance > HANDLE_REACH or self.holding(handle.name):
-                continue
-            link_pos, link_orn = self.client.getLinkState(handle.body, handle.joint)[:2]
-            inv_pos, inv_orn = self.client.invertTransform(link_pos, link_orn)
-            pivot, _ = self.client.multiplyTransforms(inv_pos, inv_orn, palm, [0, 0, 0, 1])
-            link = self.scene.robot_links[humanoid.HAND_LINKS[hand]]
-            constraint = self.client.createConstraint(
-                self.scene.robot,
-                link,
-                handle.body,
-                handle.joint,
-                pybullet.JOINT_POINT2POINT,
-                [0, 0, 0],
-                [0, 0, 0],
-                pivot,
-            )
-            self.client.changeConstraint(constraint, maxForce=GRASP_FORCE)
-            self.held[hand] = (constraint, handle.name)
-            return handle.name
-        return None
+            if distance <= HANDLE_REACH and not self.holding(handle.name):
+                self.held[hand] = (self._grasp_joint(hand, handle, palm), handle.name)
+                return handle.name
+        return None  # closed on nothing: the hand is not around anything holdable
 
-    def _close_on_hose(self, hand: str) -> str | None:
-        hose = self.scene.hose
-        if hose is None or self.hose_connected or any(n == "hose" for _, n in self.held.values()):
-            return None
-        hose_pos, hose_orn = self.client.getBasePositionAndOrientation(hose)
-        if _point_distance(self.palm(hand), hose_pos) > GRASP_RADIUS:
-            return None
+    def _grasp_joint(self, hand: str, handle: Holdable, palm: tuple[float, ...]) -> int:
+        """Make the grasp joint: fixed for a carried object, else a pivot at the palm."""
+        client = self.client
         link = self.scene.robot_links[humanoid.HAND_LINKS[hand]]
-        hand_pos, hand_orn = self.client.getLinkState(self.scene.robot, link)[:2]
-        inv_pos, inv_orn = self.client.invertTransform(hand_pos, hand_orn)
-        rel_pos, rel_orn = self.client.multiplyTransforms(inv_pos, inv_orn, hose_pos, hose_orn)
-        constraint = self.client.createConstraint(
-            self.scene.robot,
-            link,
-            hose,
-            -1,
-            pybullet.JOINT_FIXED,
-            [0, 0, 0],
-            rel_pos,
-            [0, 0, 0],
-            rel_orn,
+        if handle.carried:
+            pose = client.getBasePositionAndOrientation(handle.body)
+            hand_pos, hand_orn = client.getLinkState(self.scene.robot, link)[:2]
+            inv_pos, inv_orn = client.invertTransform(hand_pos, hand_orn)
+            rel_pos, rel_orn = client.multiplyTransforms(inv_pos, inv_orn, *pose)
+            joint = pybullet.JOINT_FIXED
+            frames: tuple[Any, ...] = ([0, 0, 0], rel_pos, [0, 0, 0], rel_orn)
+            # Carried, it must not catch on the arm that holds it.
+            self._ignore_collisions(handle.body, list(self.scene.robot_links.values()))
+        else:
+            link_pos, link_orn = client.getLinkState(handle.body, handle.joint)[:2]
+            inv_pos, inv_orn = client.invertTransform(link_pos, link_orn)
+            pivot, _ = client.multiplyTransforms(inv_pos, inv_orn, palm, [0, 0, 0, 1])
+            joint = pybullet.JOINT_POINT2POINT
+            frames = ([0, 0, 0], [0, 0, 0], pivot)
+        constraint = client.createConstraint(
+            self.scene.robot, link, handle.body, handle.joint, joint, *frames
         )
-        self.client.changeConstraint(constraint, maxForce=GRASP_FORCE)
-        self._ignore_collisions(hose, list(self.scene.robot_links.values()))
-        self.held[hand] = (constraint, "hose")
-        return "hose"
+        client.changeConstraint(constraint, maxForce=GRASP_FORCE)
+        return constraint
 
     def open(self, hand: str) -> None:
         """Open `hand`, letting go of whatever it holds."""
@@ -226,6 +232,7 @@ class Coupling:
         client, hose, pipe = self.scene.client, self.scene.hose, self.scene.standpipe
         assert pipe is not None
         self.grasps.open(hand)
+        self.grasps.handles = [h for h in self.grasps.handles if h.body != hose]
         _, pipe_orn = client.getBasePositionAndOrientation(pipe)
         client.resetBasePositionAndOrientation(hose, self.inlet(), pipe_orn)
         client.resetBaseVelocity(hose, [0, 0, 0], [0, 0, 0])

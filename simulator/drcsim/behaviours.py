@@ -142,7 +142,8 @@ class Behaviours:
                 {j: posture.get(j, 0.0) for j in ARM_JOINTS[params["hand"]]}
             )
         elif name == "grasp":
-            return {"grasped": self.grasps.close(params["hand"])}
+            grasped = self.grasps.close(params["hand"])
+            return {"grasped": grasped, **({} if grasped else {"note": "closed on nothing"})}
         elif name == "release":
             self._free_arm(params["hand"])
             self.grasps.open(params["hand"])

@@ -7,7 +7,7 @@ each gate and feels around a denser grid before giving up.
 
 from __future__ import annotations
 
-from drcsim.example_controller import SEARCH, ExampleController
+from drcsim.example_controller import SEARCH, ExampleController, grid
 
 
 class NaiveController(ExampleController):
@@ -17,6 +17,7 @@ class NaiveController(ExampleController):
     steer_gain = 2.5
     walk_past = 0.2
     search = [(0.0, 0.0)]
+    grasp_search = [(0.0, 0.0)]
     approach_door = False
     walk_tries = 1
     gait = {"step_time": 0.5, "double_support": 0.3, "step_length": 0.35}
@@ -33,6 +34,7 @@ class CarefulController(ExampleController):
     search = SEARCH + [
         (dx, dy) for dx in (-0.09, -0.03, 0.03, 0.09) for dy in (-0.09, -0.03, 0.03, 0.09)
     ]
+    grasp_search = grid(0.04, 0.12)
 
 
 CONTROLLERS: dict[str, type[ExampleController]] = {

@@ -23,6 +23,20 @@ SEARCH = [(0.0, 0.0), (0.06, 0.0), (-0.06, 0.0), (0.0, 0.06), (0.0, -0.06)]
 SEARCH += [(0.06, 0.06), (-0.06, -0.06), (0.06, -0.06), (-0.06, 0.06)]
 
 
+def grid(spacing: float, radius: float) -> list[tuple[float, float]]:
+    """Return the points of a square grid within `radius` of the origin, nearest first."""
+    n = int(radius / spacing)
+    points = [(i * spacing, j * spacing) for i in range(-n, n + 1) for j in range(-n, n + 1)]
+    inside = [(round(x, 3), round(y, 3)) for x, y in points if math.hypot(x, y) <= radius]
+    return sorted(inside, key=lambda p: (round(math.hypot(*p), 3), math.atan2(p[1], p[0])))
+
+
+# Where the hand closes to feel for the coupler: the palm must be within 5 cm of its axis
+# (the README's grasp); wherever the coupler lies within the briefing's 8 cm and however it
+# is turned, a grid 5 cm apart has a point within 3.6 cm (5/sqrt 2) of its middle.
+GRASP_SEARCH = grid(0.05, 0.115)
+
+
 def _yaw(orientation: list[float]) -> float:
     x, y, z, w = orientation
     return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
@@ -38,6 +52,7 @@ class ExampleController:
     steer_gain = 7.5
     walk_past = 1.0
     search = SEARCH
+    grasp_search = GRASP_SEARCH
     approach_door = True
     walk_tries = 2
     gait: dict[str, float] = {}  # the walker's defaults (used with balance "joints")
@@ -206,9 +221,9 @@ class ExampleController:
         table_x = course["table"]["pose"][0]
         self.walk(hose[0] - 0.45, hose[1] + 0.3, 0.0)
         # The briefing is rough: feel for the coupler around where it should be.
-        for dx, dy in self.search:
+        for dx, dy in self.grasp_search:
             self.reach("right", [hose[0] - 0.25 + dx, hose[1] + dy, hose[2] + 0.3])
-            self.reach("right", [hose[0] + dx, hose[1] + dy, hose[2] + 0.04])
+            self.reach("right", [hose[0] + dx, hose[1] + dy, hose[2] + 0.01])
             grasped = self.client.behaviour("grasp", hand="right").get("grasped")
             self.log(f"grasp at {dx:+.2f} {dy:+.2f}: {grasped}")
             if grasped:

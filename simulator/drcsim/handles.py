@@ -37,6 +37,7 @@ class Handle:
     u: Vector  # angle 0 in the link frame, perpendicular to the axis
     radius: float
     rim: bool  # a wheel (held anywhere on the circle) or a lever (held at its end)
+    carried: bool = False  # the hand pivots on it (assists.Grasps), never carries it
 
     def angle(self, scene: Scene) -> float:
         """Return the joint's real angle."""
