@@ -14,6 +14,10 @@ from drcsim.models import humanoid
 from drcsim.scene import Scene
 
 SENSOR_TOPICS = ("joint_states", "imu", "lidar", "camera", "contact")
+# The lidar's optical centre in the head frame (the one `head_in_pelvis` gives): above the
+# stereo pair and ahead of the head's face, as the MultiSense SL carries its spinning Hokuyo;
+# 8 cm ahead of the face, so beams starting 0.1 m out, up to 135° off forward, start outside it.
+LIDAR_IN_HEAD = np.array([0.16, 0.0, 0.12])
 NOISE_TABLE_SIZE = 1 << 16  # camera noise: one uint16 draw per channel indexes this table
 
 
@@ -48,6 +52,7 @@ class SensorSettings:
     lidar_beams: int = 1081
     lidar_fov: float = math.radians(270)
     lidar_range: float = 30.0
+    lidar_min_range: float = 0.1  # the Hokuyo UTM-30LX's; beams start there, as Gazebo's did
     lidar_noise: float = 0.01
     lidar_spin: float = 0.5  # rad/s of the spindle
     camera_hz: float = 10.0
@@ -162,10 +167,10 @@ class Sensors:
         pos, orn = client.multiplyTransforms(inv_pos, inv_orn, head[0], head[1])
         return {"position": list(pos), "orientation": list(orn)}
 
-    def _lidar(self, rng: np.random.Generator, sim_time: float) -> dict[str, Any]:
+    def _lidar_rays(self, spindle: float) -> tuple[np.ndarray, np.ndarray]:
+        """Return the beams' start and end points for the spindle angle `spindle`."""
         s = self.settings
         origin, rotation = self._head_pose()
-        spindle = (s.lidar_spin * sim_time) % (2 * math.pi)
         angles = self.lidar_angles
         # Scan plane: the head's x-y plane rolled about the head x axis by the spindle angle.
         local = np.stack(
@@ -177,17 +182,26 @@ class Sensors:
             axis=1,
         )
         directions = local @ rotation.T
-        start = origin + rotation @ np.array([0.1, 0.0, 0.12])
-        starts = np.repeat(start[None, :], s.lidar_beams, axis=0)
-        ends = starts + directions * s.lidar_range
+        sensor = origin + rotation @ LIDAR_IN_HEAD
+        # Like the real sensor (nothing nearer than its minimum range) and Gazebo's ray
+        # sensor in the VRC, each beam starts at the minimum range: never inside the head.
+        starts = sensor + directions * s.lidar_min_range
+        return starts, sensor + directions * s.lidar_range
+
+    def _lidar(self, rng: np.random.Generator, sim_time: float) -> dict[str, Any]:
+        s = self.settings
+        spindle = (s.lidar_spin * sim_time) % (2 * math.pi)
+        starts, ends = self._lidar_rays(spindle)
         hits = self.scene.client.rayTestBatch(starts.tolist(), ends.tolist())
-        ranges = np.array([h[2] for h in hits]) * s.lidar_range
+        span = s.lidar_range - s.lidar_min_range
+        ranges = s.lidar_min_range + np.array([h[2] for h in hits]) * span
         ranges = ranges + rng.normal(0.0, s.lidar_noise, s.lidar_beams)
-        ranges = np.clip(ranges, 0.0, s.lidar_range).astype(np.float32)
+        ranges = np.clip(ranges, s.lidar_min_range, s.lidar_range).astype(np.float32)
         return {
             "angle_min": -s.lidar_fov / 2,
             "angle_max": s.lidar_fov / 2,
             "spindle": spindle,
+            "range_min": s.lidar_min_range,
             "range_max": s.lidar_range,
             "ranges": ranges.tobytes(),
             "head_in_pelvis": self._head_in_pelvis(),
