@@ -19,6 +19,10 @@ HANDLE_REACH = 0.05  # palm to a rim, a lever's end or the coupler's axis, metre
 # The middle of the coupler's 0.16 m sleeve a palm may be at: within HANDLE_REACH of it, the
 # hand is around the sleeve and never beyond its ends.
 COUPLER_GRIP = 0.03
+# The gripper closes along the hand's z axis; it surrounds a sleeve only when it closes
+# within 45 degrees of square to the sleeve's axis (along it, the jaws would meet its ends,
+# 0.16 m apart, with 0.04 m of opening).
+JAWS_ACROSS = math.cos(math.radians(45.0))
 SEAT_FORCE = 50000.0
 GRIPPER_CLOSED = 0.04
 
@@ -91,6 +95,10 @@ class Holdable(Protocol):
         """Return where along the grip `world` is and its distance to the grip."""
         ...
 
+    def between_jaws(self, scene: Scene, closing: Any) -> bool:
+        """Return whether jaws closing along the world direction `closing` surround it."""
+        ...
+
 
 @dataclass(frozen=True)
 class Sleeve:
@@ -109,6 +117,12 @@ class Sleeve:
         local, _ = client.multiplyTransforms(inv_pos, inv_orn, list(world), [0, 0, 0, 1])
         along = max(-self.half_length, min(self.half_length, local[0]))
         return along, math.dist(local, (along, 0.0, 0.0))
+
+    def between_jaws(self, scene: Scene, closing: Any) -> bool:
+        """Return whether jaws closing along `closing` close across the sleeve's axis."""
+        orientation = scene.client.getBasePositionAndOrientation(self.body)[1]
+        axis = scene.client.getMatrixFromQuaternion(orientation)[0::3]  # the link's +x
+        return abs(sum(a * c for a, c in zip(axis, closing, strict=True))) <= JAWS_ACROSS
 
 
 class Grasps:
@@ -150,12 +164,20 @@ class Grasps:
         if hand in self.held:
             return self.held[hand][1]
         palm = self.palm(hand)
+        closing = self._closing(hand)
         for handle in self.handles:
             _, distance = handle.locate(self.scene, palm)
-            if distance <= HANDLE_REACH and not self.holding(handle.name):
+            around = distance <= HANDLE_REACH and handle.between_jaws(self.scene, closing)
+            if around and not self.holding(handle.name):
                 self.held[hand] = (self._grasp_joint(hand, handle, palm), handle.name)
                 return handle.name
         return None  # closed on nothing: the hand is not around anything holdable
+
+    def _closing(self, hand: str) -> tuple[float, float, float]:
+        """Return the world direction a hand's gripper closes along (its link's z axis)."""
+        link = self.scene.robot_links[humanoid.HAND_LINKS[hand]]
+        orientation = self.client.getLinkState(self.scene.robot, link)[1]
+        return tuple(self.client.getMatrixFromQuaternion(orientation)[2::3])  # type: ignore[return-value]
 
     def _grasp_joint(self, hand: str, handle: Holdable, palm: tuple[float, ...]) -> int:
         """Make the grasp joint: fixed for a carried object, else a pivot at the palm."""

@@ -48,6 +48,10 @@ class Handle:
         rotation = np.array(scene.client.getMatrixFromQuaternion(state[5])).reshape(3, 3)
         return np.array(state[4]), rotation
 
+    def between_jaws(self, scene: Scene, closing: object) -> bool:
+        """Return True: a hand at the rim or the lever's end pivots on it, however it closes."""
+        return True
+
     def point(self, scene: Scene, phi: float) -> np.ndarray:
         """Return the world point of the grip at angle `phi` of the fixed parent's frame."""
         origin, rotation = self._frame(scene)

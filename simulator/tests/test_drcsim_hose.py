@@ -36,6 +36,16 @@ def test_a_close_miss_holds_nothing_and_a_hand_around_the_coupler_holds_it(make_
     assert sim.behaviours.grasps.held == {}
     assert _command(sim, op="behaviour", name="release", hand="right")["ok"]
     assert _reach(sim, [x, y, z + 0.01]) < 0.03
+    # The palm in the sleeve but the sleeve turned along the jaws' closing: they meet its ends.
+    grasps, start = sim.behaviours.grasps, client.getBasePositionAndOrientation(hose)
+    hand = sim.scene.robot_links["r_hand"]
+    closing = client.getMatrixFromQuaternion(client.getLinkState(sim.scene.robot, hand)[1])[2::3]
+    turn = [0.0, -closing[2], closing[1]]  # x cross closing: turns the sleeve's +x onto it
+    angle = math.acos(closing[0])
+    along = client.getQuaternionFromAxisAngle(turn, angle)
+    client.resetBasePositionAndOrientation(hose, grasps.palm("right"), along)
+    assert _command(sim, op="behaviour", name="grasp", hand="right")["grasped"] is None
+    client.resetBasePositionAndOrientation(hose, *start)
     assert _command(sim, op="behaviour", name="grasp", hand="right")["grasped"] == "hose"
     assert _reach(sim, [x - 0.1, y, z + 0.25]) < 0.05  # carried: it follows the hand up
     lifted = client.getBasePositionAndOrientation(hose)[0]
