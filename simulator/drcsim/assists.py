@@ -69,7 +69,7 @@ def _point_distance(
 
 
 class Holdable(Protocol):
-    """A rim, lever or sleeve a closed hand can hold (drcsim.handles.Handle, Sleeve)."""
+    """A rim, lever or sleeve a closed hand can hold (drcsim.handles.Handle, Sleeve below)."""
 
     @property
     def name(self) -> str:
