@@ -30,7 +30,9 @@ class CarefulController(ExampleController):
     steer_gain = 8.0
     walk_past = 1.2
     walk_tries = 3
-    gait = {"step_time": 0.9, "double_support": 0.7, "step_length": 0.2}
+    # The walker's own gait: a slower one (0.9 s on one foot, 0.2 m steps) fell sooner in
+    # mud, where the stance foot tips further the longer it bears the robot alone.
+    gait: dict[str, float] = {}
     search = SEARCH + [
         (dx, dy) for dx in (-0.09, -0.03, 0.03, 0.09) for dy in (-0.09, -0.03, 0.03, 0.09)
     ]
