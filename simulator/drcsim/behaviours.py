@@ -48,7 +48,7 @@ class Behaviours:
         self.grasps = Grasps(scene, controller)
         self.seat = Seat(scene, controller, drive)
         self.valve = Valve(scene, controller, self.grasps)
-        self.driver = DriverLimbs(scene, controller, self.grasps, drive)
+        self.driver = DriverLimbs(scene, controller, self.grasps)
         self.coupling = Coupling(
             scene,
             self.grasps,

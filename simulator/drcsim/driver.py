@@ -14,7 +14,7 @@ import numpy as np
 
 from drcsim.assists import Grasps
 from drcsim.control import JointController
-from drcsim.driving import DIRECTIONS, VehicleDrive
+from drcsim.driving import DIRECTIONS
 from drcsim.handles import TOLERANCE, Handle, Turner, set_friction
 from drcsim.models.vehicle import INTERFACES, PEDAL_TILT, PEDALS
 from drcsim.reach import ARM_JOINTS, REACH_EVERY
@@ -144,14 +144,8 @@ class Foot:
 class DriverLimbs:
     """Moves the steering wheel, hand brake and F/N/R switch with the seated robot's arms."""
 
-    def __init__(
-        self,
-        scene: Scene,
-        controller: JointController,
-        grasps: Grasps,
-        drive: VehicleDrive | None,
-    ) -> None:
-        self.scene, self.controller, self.grasps, self.drive = scene, controller, grasps, drive
+    def __init__(self, scene: Scene, controller: JointController, grasps: Grasps) -> None:
+        self.scene, self.controller, self.grasps = scene, controller, grasps
         self.handles: dict[str, Handle] = {}
         self.targets = {"steering_wheel": 0.0, "hand_brake": 0.0, "fnr_switch": 0.0}
         self.wheel: Turner | None = None
@@ -181,7 +175,6 @@ class DriverLimbs:
         self, steering_wheel: float, throttle: float, brake: float, hand_brake: bool, direction: str
     ) -> None:
         """Set where the limbs put each interface (pedal fractions 0..1)."""
-        assert self.drive is not None
         wheel = INTERFACES["steering_wheel"]
         self.targets["steering_wheel"] = min(max(steering_wheel, wheel.lower), wheel.upper)
         self.targets["hand_brake"] = INTERFACES["hand_brake"].upper if hand_brake else 0.0
