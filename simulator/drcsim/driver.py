@@ -15,10 +15,12 @@ import numpy as np
 from drcsim.assists import Grasps
 from drcsim.control import JointController
 from drcsim.driving import DIRECTIONS
+from drcsim.gait import ANKLE_TO_SOLE, SHIN, THIGH
 from drcsim.handles import TOLERANCE, Handle, Turner, set_friction
 from drcsim.models.vehicle import INTERFACES, PEDAL_TILT, PEDALS
 from drcsim.reach import ARM_JOINTS, REACH_EVERY
 from drcsim.scene import Scene
+from drcsim.walker import ARMATURE, HIPS
 
 WHEEL_RIM = 0.18  # the steering wheel's radius, metres
 LEVER_GRIP = 0.1  # from a lever's pivot to where the hand holds it
@@ -30,16 +32,13 @@ WHEEL_STROKE = 0.9
 LEVERS = ("fnr_switch", "hand_brake")
 # Each foot has its pedal (two-footed driving: no foot moves between pedals).
 FEET = {"throttle_pedal": "r", "brake_pedal": "l"}
-THIGH = SHIN = 0.42
-HIP_XYZ = (0.0, 0.09, -0.05)  # the left hip in the pelvis frame (the right mirrors y)
-SOLE_IN_FOOT = (0.04, 0.0, -0.085)  # the sole's centre in the foot's frame
+SOLE_IN_FOOT = (0.04, 0.0, -ANKLE_TO_SOLE)  # the sole's centre in the foot's frame
 FOOT_PITCH = PEDAL_TILT - math.pi / 2  # toes up: the sole flat on the leaning pedal
 CONTACT = 0.07  # from the pedal's pivot along the plate to where the sole's centre presses
 PRESS_GAIN = 0.05  # m of foot travel per rad of pedal error, per update (50 Hz)
 PRESS_RANGE = (-0.04, 0.08)  # the foot's travel past the released pedal's face
 # The light foot in the air cannot take the standing gains as explicit PD at 1 kHz.
 ANKLE_GAINS = (150.0, 0.0, 2.0)
-ARMATURE = 0.05  # kg m2
 LEG_RATE = 2.0  # rad/s: how fast the leg's targets move
 
 
@@ -51,7 +50,7 @@ class Foot:
         side = FEET[pedal]
         self.slots = np.array([controller.slot[f"{side}_leg_{j}"] for j in ("hpy", "kny", "aky")])
         self.ankle = [controller.slot[f"{side}_leg_{j}"] for j in ("aky", "akx")]
-        self.hip = np.array([HIP_XYZ[0], HIP_XYZ[1] * (1 if side == "l" else -1), HIP_XYZ[2]])
+        self.hip = HIPS["left" if side == "l" else "right"]
         self.link = scene.robot_links[f"{side}_foot"]
         self.ankle_links = [scene.robot_links[f"{side}_{part}"] for part in ("talus", "foot")]
         self.press = PRESS_RANGE[0]
@@ -68,7 +67,7 @@ class Foot:
         self.saved = [(c.kp[i], c.ki[i], c.kd[i]) for i in self.ankle]
         for slot in self.ankle:
             c.set_gains(c.names[slot], *ANKLE_GAINS)
-        # The ankle actuator's reflected inertia (as the walker's): without it the light foot
+        # The ankle actuator's reflected inertia (the walker's): without it the light foot
         # chatters at the velocity limit's full-effort brake.
         robot = self.scene.robot
         self.inertia = [list(client.getDynamicsInfo(robot, link)[2]) for link in self.ankle_links]
