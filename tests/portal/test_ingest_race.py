@@ -1,7 +1,8 @@
 """The same run record sent twice at the same instant (an instance's retry overtaking its first
 try): the request that loses the race answers the run the other one stored, never a 500 nor a
 refusal. The race is set up without threads: the other request's run is stored (committed, in
-its own session) after this request looked for it and found nothing."""
+its own session) after this request looked for it and found nothing. Only the same instance's
+same run is a twin: another run of the task is still refused."""
 
 from __future__ import annotations
 
@@ -16,9 +17,10 @@ from sqlalchemy import func, select
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.extensions import db
-from cloudsim.models import PortalRefusal, Run
+from cloudsim.models import Constellation, PortalRefusal, Run, TeamInstance
 from cloudsim.people.service import create_team
 from cloudsim.portal import ingest
+from cloudsim.portal.credentials import upload_token
 from tests.conftest import running_app
 from tests.portal.support import uploader
 from tests.support.servers import PostgresServer
@@ -60,3 +62,26 @@ def test_a_run_sent_twice_at_once_is_stored_once_and_both_answer_it(
     db.session.rollback()
     assert db.session.scalar(select(func.count()).select_from(Run)) == 1
     assert db.session.scalar(select(func.count()).select_from(PortalRefusal)) == 0
+
+
+def test_the_twin_check_still_refuses_another_finished_run_of_the_task(master: Flask) -> None:
+    team = create_team(SYSTEM, "Team A")
+    token, record = uploader(team, b"")
+    client = master.test_client()
+    first = client.put(URL, json=record, headers=token)
+    assert first.status_code == 200, first.json
+    # the same remote id from another instance of the team, and another run of this instance
+    other = TeamInstance(
+        name="ti-a2",
+        team=team,
+        constellation=Constellation(name="ti-a2", kind="cloudsim", provider="local"),
+    )
+    db.session.add(other)
+    db.session.commit()
+    theirs = {"Authorization": f"Bearer {upload_token(other)}"}
+    for url, headers in ((URL, theirs), (URL.replace("/7", "/8"), token)):
+        refused = client.put(url, json=record, headers=headers)
+        assert refused.status_code == 403, refused.json
+        assert "already has a finished run" in refused.json["message"]
+    db.session.rollback()
+    assert db.session.scalar(select(func.count()).select_from(Run)) == 1
