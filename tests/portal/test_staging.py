@@ -1,9 +1,11 @@
 """The master's parts of logs still arriving: a refused run's removed at once, an abandoned
-one's removed by the beat after CLOUDSIM_PORTAL_STAGING_HOURS, one under way never."""
+one's removed by the beat after CLOUDSIM_PORTAL_STAGING_HOURS, one under way never; a part's
+running SHA-256 kept only while the part holds what it was kept for."""
 
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -91,3 +93,34 @@ def test_a_refused_runs_parts_go_at_once_abandoned_ones_with_the_beat(
     assert not part(2).parent.exists()  # its folder went with its last part
     # run 3 goes on from where it was
     assert _put(master, token, f"{base}/3/logs/a.bin?offset=1000", LOG[1000:]).json["complete"]
+
+
+def test_a_parts_running_hash_is_kept_only_while_it_is_what_the_part_holds(
+    tmp_path: Path,
+) -> None:
+    part = tmp_path / "1" / "a.bin.part"
+
+    def receive(piece: bytes) -> Any:  # as a piece is received: the hash, then kept after it
+        with staging.open_part(part) as staged:
+            digest = staging.running_sha256(part, staged)
+            staged.write(piece)
+            staged.flush()
+            digest.update(piece)
+            staging.keep_sha256(part, staged, digest)
+            return digest
+
+    kept = receive(b"one")
+    with staging.open_part(part) as staged:  # the next piece in this process: the kept hash
+        assert staging.running_sha256(part, staged) is kept
+    receive(b"two")
+    with part.open("ab") as other:  # another worker appends: the part is read again
+        other.write(b"three")
+    assert receive(b"four").hexdigest() == hashlib.sha256(b"onetwothreefour").hexdigest()
+    part.unlink()  # removed and made again, as long (its mtime tells them apart)
+    part.write_bytes(b"ONETWOTHREEFOUR")
+    os.utime(part, ns=(1, 1))
+    with staging.open_part(part) as staged:
+        assert (
+            staging.running_sha256(part, staged).hexdigest()
+            == hashlib.sha256(b"ONETWOTHREEFOUR").hexdigest()
+        )
