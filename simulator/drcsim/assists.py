@@ -24,6 +24,8 @@ COUPLER_GRIP = 0.03
 # 0.16 m apart, with 0.04 m of opening).
 JAWS_ACROSS = math.cos(math.radians(45.0))
 SEAT_FORCE = 50000.0
+# The links that pass through what a hand closes on (the fingers do not wrap around it).
+HAND_PARTS = ("hand", "finger", "larm", "ufarm")
 GRIPPER_CLOSED = 0.04
 
 
@@ -139,7 +141,7 @@ class Grasps:
             self.handles.append(Sleeve("hose", scene.hose, COUPLER_GRIP))
             # Hands pass through the hose so that closing on it never knocks it away (the
             # fingers do not wrap around it, as on the rims).
-            hands = [n for n in scene.robot_links if n[2:] in ("hand", "finger", "larm", "ufarm")]
+            hands = [n for n in scene.robot_links if n[2:] in HAND_PARTS]
             self._ignore_collisions(scene.hose, [scene.robot_links[n] for n in hands])
             if scene.standpipe is not None:
                 # The coupler slides onto the inlet; the coupling assist makes the joint.

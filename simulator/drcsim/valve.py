@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from drcsim.assists import Grasps
+from drcsim.assists import HAND_PARTS, Grasps
 from drcsim.control import JointController
 from drcsim.errors import CommandError
 from drcsim.handles import Handle, Turner, set_friction
@@ -35,7 +35,7 @@ class Valve:
         grasps.handles.append(self.handle)
         set_friction(scene, self.handle, VALVE_FRICTION)
         # The fingers close around the rim: the hand never knocks the wheel about.
-        for name in ("hand", "finger", "larm", "ufarm"):
+        for name in HAND_PARTS:
             for side in "lr":
                 link = scene.robot_links[f"{side}_{name}"]
                 scene.client.setCollisionFilterPair(scene.robot, pipe, link, 0, 0)
