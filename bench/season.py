@@ -238,13 +238,15 @@ def main() -> None:
         "CLOUDSIM_ARGON2_TIME_COST": "1",
         "CLOUDSIM_ARGON2_MEMORY_KIB": "1024",
     }
-    headers = seed(env)
     config = Config.from_env(env)
-    started = time.perf_counter()
-    build_wheelhouse(distribution_source("drcsim"), instance / "wheelhouse", config.machine_python)
-    wheelhouse = time.perf_counter() - started
     hosts_dir = instance / "local-hosts" / prefix / "hosts"
-    try:
+    try:  # the folder goes whatever fails, seeding and the wheelhouse build included
+        headers = seed(env)
+        started = time.perf_counter()
+        build_wheelhouse(
+            distribution_source("drcsim"), instance / "wheelhouse", config.machine_python
+        )
+        wheelhouse = time.perf_counter() - started
         with stack(env, instance) as base:
             figures = storm(base, headers, args, prefix, hosts_dir)
     finally:
