@@ -170,8 +170,9 @@ class Behaviours:
                 str(params.get("direction", "neutral")),
             )
         elif name == "turn_valve":
-            self.reaches.pop(params["hand"], None)
+            # Started first: a refused turn (hand not at the valve) leaves the reach as it was.
             self.valve.start(params["hand"], float(params.get("angle", 2 * math.pi)))
+            self.reaches.pop(params["hand"], None)
         else:
             raise CommandError(f"unknown behaviour {name!r}")
         return {}

@@ -23,6 +23,12 @@ def test_the_valve_turns_only_with_a_hand_holding_its_rim(make_sim) -> None:
     sim = make_sim("vrc_task_3", "1")
     valve = sim.behaviours.valve
     x, y, z = valve.centre()
+    # Refused (the hand is far from the valve): nothing changes, the arm's reach goes on.
+    assert _command(sim, op="behaviour", name="reach", hand="left", target=[0.3, 0.3, 1.0])["ok"]
+    refused = _command(sim, op="behaviour", name="turn_valve", hand="left")
+    assert refused["ok"] is False and "not at the valve" in refused["error"]
+    assert "left" in sim.behaviours.reaches and valve.status_word == "idle"
+    assert _command(sim, op="behaviour", name="arm_rest", hand="left")["ok"]
     assert _command(sim, op="behaviour", name="walk", pose=[x - 0.5, y - 0.3, 0.0])["ok"]
     _until(sim, lambda: sim.behaviours.walk_status != "walking", 20_000)
     # A hand closed in front of the wheel's centre holds nothing: only the rim can be held.
