@@ -36,7 +36,12 @@ class _BoundClient(BulletClient):
 
     def __getattr__(self, name: str) -> Any:
         attribute = super().__getattr__(name)
-        if name != "disconnect" and isinstance(attribute, functools.partial):
+        if name == "disconnect":
+            # The kept partials carry this client's id, which pybullet hands to the next
+            # connection: dropped, a closed client raises instead of moving another world.
+            for kept in [k for k, v in vars(self).items() if isinstance(v, functools.partial)]:
+                delattr(self, kept)
+        elif isinstance(attribute, functools.partial):
             setattr(self, name, attribute)
         return attribute
 

@@ -1,8 +1,10 @@
-"""Joint control: limits are enforced whatever the command."""
+"""Joint control: limits are enforced whatever the command, on the client's own world."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
+from drcsim._bullet import new_client, pybullet
 from drcsim.protocol import check_command
 
 
@@ -36,3 +38,16 @@ def test_torques_are_clamped_to_effort_and_speed_limits(make_sim) -> None:
         # Past its limit a joint brakes at full effort: at most one step of overshoot.
         assert fastest[slot] <= c.max_velocity[slot] * 1.3
     assert fastest[c.slot["l_arm_wrx"]] > 1.0  # the torque did act
+
+
+def test_a_closed_physics_client_cannot_reach_the_next_ones_world() -> None:
+    closed = new_client()
+    closed.getNumBodies()  # bound to its client id and kept
+    closed.disconnect()
+    other = new_client()  # pybullet gives it the id just freed
+    try:
+        other.createMultiBody(baseMass=1.0)
+        with pytest.raises(pybullet.error):
+            closed.getNumBodies()
+    finally:
+        other.disconnect()
