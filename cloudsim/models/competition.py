@@ -6,7 +6,7 @@ import enum
 from datetime import datetime
 from typing import TYPE_CHECKING, Any
 
-from sqlalchemy import JSON, BigInteger, ForeignKey, String, Text, UniqueConstraint
+from sqlalchemy import JSON, BigInteger, ForeignKey, Index, String, Text, UniqueConstraint, text
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from cloudsim.models.base import Base, UTCDateTime, str_enum, utcnow
@@ -62,15 +62,29 @@ class RunState(enum.StrEnum):
     ERROR = "error"
 
 
+COUNTED = "state = 'finished' AND invalidated_at IS NULL"  # the one finished run of a task
+
+
 class Run(Base):
     """One attempt by a team at a task, on one of its constellations.
 
     On a master, a run a team instance uploaded (cloudsim.portal) is a row like any other,
-    marked with the instance and the instance's own id for it (one row per pair).
+    marked with the instance and the instance's own id for it (one row per pair). A task has
+    at most one finished run that counts (not invalidated): the database holds that too, so
+    two uploads at the same instant cannot both be stored.
     """
 
     __tablename__ = "runs"
-    __table_args__ = (UniqueConstraint("instance_id", "remote_run_id"),)
+    __table_args__ = (
+        UniqueConstraint("instance_id", "remote_run_id"),
+        Index(
+            "uq_runs_task_counted",
+            "task_id",
+            unique=True,
+            sqlite_where=text(COUNTED),
+            postgresql_where=text(COUNTED),
+        ),
+    )
 
     id: Mapped[int] = mapped_column(primary_key=True)
     task_id: Mapped[int] = mapped_column(ForeignKey("tasks.id", ondelete="CASCADE"), index=True)

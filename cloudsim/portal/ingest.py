@@ -197,9 +197,9 @@ def receive_run(instance: TeamInstance, remote_id: int, record_: dict[str, Any])
     db.session.add(run)
     try:
         db.session.flush()
-    except IntegrityError:  # the same record sent twice at once: the other request stored it
+    except IntegrityError:  # another request stored this run, or the task's finished run, at once
         db.session.rollback()
-        twin = uploaded_run(instance, remote_id)
+        twin = uploaded_run(instance, remote_id) or _check_once(task, record_, instance, remote_id)
         if twin is None:
             raise
         return twin

@@ -151,6 +151,7 @@ class Refusals(MethodView):
 class RunReview(MethodView):
     @blp.arguments(ReviewSchema)
     @blp.response(200, RunSchema)
+    @blp.alt_response(409, description="reinstating while another finished run of the task counts")
     def patch(self, data: dict[str, Any], run_id: int) -> Any:
         """Set an officer's note on a run, invalidate it (`reason` required: it no longer
         counts in the ranking) or count it again (officers; audited)."""

@@ -11,7 +11,7 @@ from wtforms import BooleanField, TextAreaField
 from wtforms.validators import Length, Optional
 
 from cloudsim.auth.policy import role_required
-from cloudsim.errors import InvalidInput
+from cloudsim.errors import Conflict, InvalidInput
 from cloudsim.extensions import db
 from cloudsim.models import Role, Run
 from cloudsim.portal import review
@@ -68,7 +68,7 @@ def review_run(run_id: int) -> ResponseReturnValue:
             invalidated=bool(form.invalidated.data),
             reason=form.reason.data,
         )
-    except InvalidInput as exc:
+    except (InvalidInput, Conflict) as exc:
         db.session.rollback()
         flash(str(exc), "error")
         return redirect(url_for("competition.run", run_id=run_id))

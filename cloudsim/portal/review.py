@@ -11,9 +11,9 @@ from sqlalchemy.orm import selectinload
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import Actor, require_role
 from cloudsim.competition.runs import get_run
-from cloudsim.errors import InvalidInput
+from cloudsim.errors import Conflict, InvalidInput
 from cloudsim.extensions import db
-from cloudsim.models import PortalRefusal, Role, Run, TeamInstance, utcnow
+from cloudsim.models import PortalRefusal, Role, Run, RunState, TeamInstance, utcnow
 from cloudsim.portal.ingest import Refused
 
 MAX_NOTE = 2000
@@ -49,6 +49,24 @@ def _text(value: str | None, what: str) -> str | None:
     if value is not None and len(value) > MAX_NOTE:
         raise InvalidInput(f"{what} is at most {MAX_NOTE} characters")
     return value
+
+
+def _check_counted_alone(run: Run) -> None:
+    """Refuse to count a finished run again while another finished run of its task counts."""
+    if run.state != RunState.FINISHED:
+        return
+    other = db.session.scalar(
+        select(Run.id).where(
+            Run.task_id == run.task_id,
+            Run.id != run.id,
+            Run.state == RunState.FINISHED,
+            Run.invalidated_at.is_(None),
+        )
+    )
+    if other is not None:
+        raise Conflict(
+            f"run {other} of the same task counts now; invalidate it before reinstating this one"
+        )
 
 
 def review_run(
@@ -89,6 +107,7 @@ def review_run(
                 reason=why,
             )
     elif invalidated is False and run.invalidated_at is not None:
+        _check_counted_alone(run)
         run.invalidated_at, run.invalid_reason = None, None
         record("run.reinstate", actor, target_type="run", target_id=run.id, team_id=run.team_id)
     db.session.flush()

@@ -16,10 +16,11 @@ from sqlalchemy import func, select
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
+from cloudsim.errors import Conflict
 from cloudsim.extensions import db
 from cloudsim.models import Constellation, PortalRefusal, Run, TeamInstance
 from cloudsim.people.service import create_team
-from cloudsim.portal import ingest
+from cloudsim.portal import ingest, review
 from cloudsim.portal.credentials import upload_token
 from tests.conftest import running_app
 from tests.portal.support import uploader
@@ -85,3 +86,42 @@ def test_the_twin_check_still_refuses_another_finished_run_of_the_task(master: F
         assert "already has a finished run" in refused.json["message"]
     db.session.rollback()
     assert db.session.scalar(select(func.count()).select_from(Run)) == 1
+
+
+def test_two_finished_runs_of_one_task_at_once_store_one(
+    master: Flask, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    team = create_team(SYSTEM, "Team A")
+    token, record = uploader(team, b"")
+    client = master.test_client()
+    assert client.put(URL, json=record, headers=token).status_code == 200
+    checked, missed = ingest._check_once, [None]
+
+    def late(*args: Any) -> Run | None:
+        return missed.pop() if missed else checked(*args)  # the other run was stored meanwhile
+
+    monkeypatch.setattr(ingest, "_check_once", late)
+    refused = client.put(URL.replace("/7", "/8"), json=record, headers=token)
+    assert refused.status_code == 403, refused.json
+    assert "already has a finished run" in refused.json["message"]
+    monkeypatch.undo()
+    db.session.rollback()
+    assert db.session.scalar(select(func.count()).select_from(Run)) == 1
+    assert db.session.scalar(select(func.count()).select_from(PortalRefusal)) == 1
+
+
+def test_a_run_is_counted_again_only_while_no_other_run_of_its_task_counts(master: Flask) -> None:
+    team = create_team(SYSTEM, "Team A")
+    token, record = uploader(team, b"")
+    client = master.test_client()
+    first = client.put(URL, json=record, headers=token).json["run_id"]
+    review.review_run(SYSTEM, first, invalidated=True, reason="ran the wrong world")
+    db.session.commit()
+    second = client.put(URL.replace("/7", "/8"), json=record, headers=token)
+    assert second.status_code == 200, second.json  # the task's counted run now
+    with pytest.raises(Conflict, match=f"run {second.json['run_id']} of the same task counts"):
+        review.review_run(SYSTEM, first, invalidated=False)
+    db.session.rollback()
+    assert db.session.get(Run, first).invalid_reason == "ran the wrong world"
+    review.review_run(SYSTEM, second.json["run_id"], invalidated=True, reason="swapped")
+    assert review.review_run(SYSTEM, first, invalidated=False).invalidated_at is None

@@ -34,16 +34,22 @@ def test_the_run_api_shows_each_runs_upload_as_documented(app: Flask, team_a: Te
     assert set(documented) == {"state", "percent", "portal_run_id", "error", "next_attempt_at"}
     assert "upload" in spec["components"]["schemas"]["Run"]["properties"]
 
-    masters = open_task(team_a.id, name="Driving 1", master_key="m7").id
+    keys = iter(range(7, 13))
+
+    def masters() -> int:
+        """Add one of the master's tasks (a task has one finished run)."""
+        key = next(keys)
+        return open_task(team_a.id, name=f"Driving {key}", master_key=f"m{key}").id
+
     own = open_task(team_a.id, name="Practice").id  # the instance's own task: not uploaded
     retry_at = utcnow() + timedelta(seconds=40)
     runs = {
         "own": _run(own, team_a.id),
-        "live": _run(masters, team_a.id, RunState.RUNNING),
-        "not queued yet": _run(masters, team_a.id),
-        "uploading": _run(masters, team_a.id, RunState.ERROR),
-        "uploaded": _run(masters, team_a.id),
-        "refused": _run(masters, team_a.id),
+        "live": _run(masters(), team_a.id, RunState.RUNNING),
+        "not queued yet": _run(masters(), team_a.id),
+        "uploading": _run(masters(), team_a.id, RunState.ERROR),
+        "uploaded": _run(masters(), team_a.id),
+        "refused": _run(masters(), team_a.id),
     }
     db.session.add_all(
         [
