@@ -63,6 +63,9 @@ PLAN_STEPS = 8  # steps planned at a time: then both feet down and a fresh plan
 # up by itself: a softer ankle roll, the swing foot placed from the pelvis's real pose, and
 # capture-point stepping (the landing moves by the capture point's error).
 SOFT_ANKLE_ROLL = 800.0  # N m/rad
+# ...which takes a larger roll correction from the IMU to push as hard as the stiff one did
+# (with 1.0 the body rolled about 0.1 rad towards the swing foot at every step in the mud).
+SOFT_ROLL_TILT_GAIN = 3.0
 STEP_GAIN = 1.0  # landing shift per metre of capture-point error
 STEP_FREEZE = 0.75  # share of the swing after which its landing point stays put
 HIPS = {  # each hip joint in the pelvis frame (the right one mirrored)
@@ -209,7 +212,10 @@ class Walker:
             ahead = self.zmp[self.tick : self.tick + horizon]
             ahead += [self.zmp[-1]] * (horizon - len(ahead))
         else:
-            still = (float(self.com[0]), float(self.com[1]))
+            # Standing: the ZMP (and so the COM) between the feet where they really are, not
+            # wherever the COM happens to be (that let a standing robot drift off its feet).
+            feet = [self._foot(side) for side in ("left", "right")]
+            still = ((feet[0].x + feet[1].x) / 2, (feet[0].y + feet[1].y) / 2)
             ahead = [still] * horizon
         future = np.array(ahead)
         self.com_from = self.com_to
@@ -382,7 +388,7 @@ class Walker:
         ankle = np.array([foot.x, foot.y, foot.z + ANKLE_TO_SOLE])
         angles = np.array(leg_ik(hip, body, ankle, rotation(0.0, 0.0, foot.yaw)))
         angles[4] += TILT_GAIN * ankle_tilt[1]  # stance ankle: the ankle strategy
-        angles[5] += TILT_GAIN * ankle_tilt[0]
+        angles[5] += ankle_tilt[0] * (SOFT_ROLL_TILT_GAIN if self.soft else TILT_GAIN)
         angles[2] += TILT_GAIN * hip_tilt[1] * 0.5
         angles[1] += TILT_GAIN * hip_tilt[0] * 0.5
         self.controller.set_slot_positions(self.slots[side], angles)
