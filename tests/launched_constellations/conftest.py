@@ -20,16 +20,25 @@ from tests.support.workers import job_finished
 PREFIX = f"cf{os.getpid() % 100000}"
 
 
+def hosts_config(
+    make_config: Callable[..., Config], prefix: str, networks: int, **settings: object
+) -> Config:
+    """Return a config for local hosts on a prefix and networks of their own (10.N.0.0/16 and
+    198.18.M.0/24 with M = N - 200), so that test files never share a host or a network."""
+    if os.geteuid() != 0:
+        pytest.fail("local host tests need root (the local provider makes namespaces)")
+    return make_config(
+        local_prefix=prefix,
+        local_subnet_pool=f"10.{networks}.0.0/16",
+        local_public_cidr=f"198.18.{networks - 200}.0/24",
+        job_lease_seconds=5,
+        **settings,
+    )
+
+
 @pytest.fixture
 def constellations_config(make_config: Callable[..., Config]) -> Config:
-    if os.geteuid() != 0:
-        pytest.fail("constellation tests need root (the local provider makes namespaces)")
-    return make_config(
-        local_prefix=PREFIX,
-        local_subnet_pool="10.213.0.0/16",
-        local_public_cidr="198.18.13.0/24",
-        job_lease_seconds=5,
-    )
+    return hosts_config(make_config, PREFIX, 213)
 
 
 @pytest.fixture

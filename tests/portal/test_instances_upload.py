@@ -31,6 +31,7 @@ from tests.launched_constellations.conftest import (  # noqa: F401 (fixtures use
     constellations_app,
     constellations_worker,
     finished,
+    hosts_config,
 )
 from tests.portal.ingest_support import MasterServer
 from tests.provisioners.providers.servers.keys import make_key_pair
@@ -45,15 +46,7 @@ GATEWAY = "198.18.19.1"  # the public network's gateway: the master's portal, fo
 
 @pytest.fixture
 def constellations_config(make_config: Callable[..., Config]) -> Config:
-    if os.geteuid() != 0:
-        pytest.fail("team instance tests need root (the local provider makes namespaces)")
-    return make_config(
-        local_prefix=PREFIX,
-        local_subnet_pool="10.219.0.0/16",
-        local_public_cidr="198.18.19.0/24",
-        job_lease_seconds=5,
-        portal_url=f"https://{GATEWAY}:{free_port()}/",
-    )
+    return hosts_config(make_config, PREFIX, 219, portal_url=f"https://{GATEWAY}:{free_port()}/")
 
 
 def _launched(config: Config, instances: list[TeamInstance]) -> list[dict[str, Any]] | None:

@@ -12,6 +12,7 @@ from cloudsim.config import Config
 from tests.launched_constellations.conftest import (  # noqa: F401 (fixtures used here)
     constellations_app,
     constellations_worker,
+    hosts_config,
 )
 
 PREFIX = f"ti{os.getpid() % 100000}"
@@ -19,11 +20,4 @@ PREFIX = f"ti{os.getpid() % 100000}"
 
 @pytest.fixture
 def constellations_config(make_config: Callable[..., Config]) -> Config:
-    if os.geteuid() != 0:
-        pytest.fail("team instance tests need root (the local provider makes namespaces)")
-    return make_config(
-        local_prefix=PREFIX,
-        local_subnet_pool="10.218.0.0/16",
-        local_public_cidr="198.18.18.0/24",
-        job_lease_seconds=5,
-    )
+    return hosts_config(make_config, PREFIX, 218)
