@@ -76,7 +76,19 @@ class SensorSettings:
                 setattr(settings, key, str(value).lower() in ("1", "true", "yes", "on"))
             else:
                 setattr(settings, key, kind(value))
+        settings.check()
         return settings
+
+    def check(self) -> None:
+        """Refuse settings no sensor can have (a ValueError naming the first)."""
+        for key, value in vars(self).items():
+            if isinstance(value, bool):
+                continue
+            may_be_zero = key.endswith(("noise", "spin"))
+            if not math.isfinite(value) or value < 0 or (value == 0 and not may_be_zero):
+                raise ValueError(f"{key} must be a finite number above 0 (noise and spin may be 0)")
+        if self.lidar_min_range >= self.lidar_range:
+            raise ValueError("lidar_min_range must be below lidar_range")
 
 
 @dataclass

@@ -53,6 +53,16 @@ def test_unknown_world_is_a_one_line_error() -> None:
     assert done.returncode != 0 and "invalid choice" in done.stderr
 
 
+def test_a_sensor_setting_no_sensor_can_have_is_a_one_line_error() -> None:
+    for bad, says in (
+        ("lidar_min_range=40", "lidar_min_range must be below lidar_range"),
+        ("camera_hz=0", "camera_hz must be a finite number above 0"),
+        ("lidar_noise=nan", "lidar_noise must be a finite number"),
+    ):
+        done = _drcsim("serve", "--world", "vrc_task_1", "--sensor", bad, "--time-limit", "1")
+        assert done.returncode != 0 and f"bad --sensor setting: {says}" in done.stderr, bad
+
+
 def test_ladder_runs_reference_controllers_over_the_network_and_prints_the_table() -> None:
     done = _drcsim(
         "ladder",
