@@ -16,13 +16,12 @@ from sqlalchemy import func, select
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
-from cloudsim.errors import Conflict
 from cloudsim.extensions import db
-from cloudsim.models import Constellation, PortalRefusal, Run, TeamInstance
+from cloudsim.models import Constellation, PortalRefusal, Role, Run, TeamInstance
 from cloudsim.people.service import create_team
-from cloudsim.portal import ingest, review
+from cloudsim.portal import ingest
 from cloudsim.portal.credentials import upload_token
-from tests.conftest import running_app
+from tests.conftest import csrf_token, log_in, make_user, running_app, token_for
 from tests.portal.support import uploader
 from tests.support.servers import PostgresServer
 
@@ -114,14 +113,26 @@ def test_a_run_is_counted_again_only_while_no_other_run_of_its_task_counts(maste
     team = create_team(SYSTEM, "Team A")
     token, record = uploader(team, b"")
     client = master.test_client()
+    officer = token_for(make_user(Role.OFFICER))
     first = client.put(URL, json=record, headers=token).json["run_id"]
-    review.review_run(SYSTEM, first, invalidated=True, reason="ran the wrong world")
-    db.session.commit()
+    review = f"/api/v1/runs/{first}/review"
+    invalidate = {"invalidated": True, "reason": "ran the wrong world"}
+    assert client.patch(review, json=invalidate, headers=officer).status_code == 200
     second = client.put(URL.replace("/7", "/8"), json=record, headers=token)
     assert second.status_code == 200, second.json  # the task's counted run now
-    with pytest.raises(Conflict, match=f"run {second.json['run_id']} of the same task counts"):
-        review.review_run(SYSTEM, first, invalidated=False)
-    db.session.rollback()
-    assert db.session.get(Run, first).invalid_reason == "ran the wrong world"
-    review.review_run(SYSTEM, second.json["run_id"], invalidated=True, reason="swapped")
-    assert review.review_run(SYSTEM, first, invalidated=False).invalidated_at is None
+    counts = f"run {second.json['run_id']} of the same task counts"
+    again = client.patch(review, json={"invalidated": False}, headers=officer)
+    assert again.status_code == 409 and counts in again.json["message"]
+    browser = master.test_client()  # the run page's review form, as an officer submits it
+    log_in(browser, make_user(Role.OFFICER))
+    page = browser.get(f"/runs/{first}").get_data(as_text=True)
+    form = {"csrf_token": csrf_token(page), "note": "", "reason": ""}  # Invalidated unticked
+    shown = browser.post(f"/runs/{first}/review", data=form, follow_redirects=True)
+    assert shown.status_code == 200 and counts in shown.get_data(as_text=True)
+    db.session.expire_all()
+    assert db.session.get(Run, first).invalid_reason == "ran the wrong world"  # unchanged
+    swap = {"invalidated": True, "reason": "swapped"}
+    url = f"/api/v1/runs/{second.json['run_id']}/review"
+    assert client.patch(url, json=swap, headers=officer).status_code == 200
+    counted = client.patch(review, json={"invalidated": False}, headers=officer)
+    assert counted.status_code == 200 and counted.json["invalidated_at"] is None
