@@ -1,8 +1,9 @@
 """Runs with a simulator state log of a real run's size, uploaded to the portal (bench/portal).
 
-A state log as drcsim writes it (`drcsim.runlog`: a msgpack record at 100 Hz, the step, the
-simulated time, the 229 float32 values of vrc_task_2's state vector and a 16-character
-digest: 969 bytes a record, 175 MB for 30 minutes) is generated once into a temporary file;
+A state log written by drcsim's own writer (`drcsim.runlog.RunLog`: a msgpack record at
+100 Hz, the step, the simulated time, the 229 float32 values of vrc_task_2's state vector and
+a 16-character digest: 969 bytes a record, 175 MB for 30 minutes) is generated once into a
+temporary folder;
 each sampled run declares it beside its score and bandwidth logs, and its instance sends it
 as the outbox does (one run at a time, 8 MiB pieces at increasing offsets). The reference,
 measured on the same bytes in the same run: a local copy of the file and its SHA-256, the
@@ -12,9 +13,9 @@ least the master must do with a log it receives.
 from __future__ import annotations
 
 import hashlib
+import json
 import random
 import shutil
-import struct
 import tempfile
 import time
 from collections.abc import Iterator
@@ -23,8 +24,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import msgpack
 import requests
+from drcsim.rundir import FINAL, STATE
+from drcsim.runlog import RunLog
 
 from bench.portal_ingest import INGEST, Uploader, record, small_logs
 from cloudsim.portal.outbox import PIECE
@@ -43,33 +45,17 @@ class StateLog:
     sha256: str
 
 
-def write_state_log(path: Path, minutes: float) -> StateLog:
-    """Write a state log of `minutes` of simulated time in drcsim's format."""
+def write_state_log(folder: Path, minutes: float) -> StateLog:
+    """Write a state log of `minutes` of simulated time with drcsim's own run log writer."""
     rng = random.Random(11)
-    pool = [
-        struct.pack(f"<{STATE_FLOATS}f", *(rng.uniform(-20, 20) for _ in range(STATE_FLOATS)))
-        for _ in range(POOL)
-    ]
-    packer = msgpack.Packer()
-    digest = hashlib.sha256()
-    with path.open("wb") as out:
-        batch = bytearray()
-        for index in range(round(minutes * 60 * HZ)):
-            batch += packer.pack(
-                {
-                    "step": 10 * (index + 1),  # 1 kHz physics, logged every 10th step
-                    "t": (index + 1) / HZ,
-                    "state32": pool[index % POOL],
-                    "digest": f"{rng.getrandbits(64):016x}",
-                }
-            )
-            if len(batch) >= PIECE:
-                digest.update(batch)
-                out.write(batch)
-                batch.clear()
-        digest.update(batch)
-        out.write(batch)
-    return StateLog(path, path.stat().st_size, digest.hexdigest())
+    pool = [[rng.uniform(-20, 20) for _ in range(STATE_FLOATS)] for _ in range(POOL)]
+    log = RunLog(folder, {"bench": "portal"})
+    for index in range(round(minutes * 60 * HZ)):  # 1 kHz physics, logged every 10th step
+        log.state(10 * (index + 1), (index + 1) / HZ, pool[index % POOL])
+    log.close({})
+    final = json.loads((folder / FINAL).read_text())
+    path = folder / STATE
+    return StateLog(path, path.stat().st_size, final["state_log_sha256"])
 
 
 @contextmanager
@@ -77,7 +63,7 @@ def state_log(minutes: float) -> Iterator[StateLog]:
     """Yield a generated state log in a temporary folder, removed afterwards."""
     folder = Path(tempfile.mkdtemp(prefix="cloudsim-bench-state-"))
     try:
-        yield write_state_log(folder / "state.msgpack", minutes)
+        yield write_state_log(folder, minutes)
     finally:
         shutil.rmtree(folder)
 
@@ -106,9 +92,7 @@ def upload_large(base: str, uploaders: list[Uploader], log: StateLog) -> dict[st
         {"filename": x.filename, "kind": x.kind, "size": len(x.body), "sha256": x.sha256}
         for x in small
     ]
-    declared.append(
-        {"filename": "state.msgpack", "kind": "state", "size": log.size, "sha256": log.sha256}
-    )
+    declared.append({"filename": STATE, "kind": "state", "size": log.size, "sha256": log.sha256})
     seconds = []
     for me in uploaders:
         http = requests.Session()
@@ -122,7 +106,7 @@ def upload_large(base: str, uploaders: list[Uploader], log: StateLog) -> dict[st
             with log.path.open("rb") as handle:
                 offset = 0
                 while piece := handle.read(PIECE):
-                    answers.append(_piece(http, f"{url}/logs/state.msgpack", offset, piece))
+                    answers.append(_piece(http, f"{url}/logs/{STATE}", offset, piece))
                     offset += len(piece)
             answers.append(http.post(f"{url}/complete"))
             seconds.append(time.perf_counter() - began)
