@@ -129,6 +129,16 @@ def _check_window(task: Task, record_: dict[str, Any], config: Config) -> None:
         )
 
 
+def counted_run(task_id: int, other_than: int | None = None) -> Run | None:
+    """Return the task's finished run that counts (not invalidated), if any but `other_than`."""
+    query = select(Run).where(
+        Run.task_id == task_id, Run.state == RunState.FINISHED, Run.invalidated_at.is_(None)
+    )
+    if other_than is not None:
+        query = query.where(Run.id != other_than)
+    return db.session.scalar(query)
+
+
 def _check_once(
     task: Task, record_: dict[str, Any], instance: TeamInstance, remote_id: int
 ) -> Run | None:
@@ -136,13 +146,7 @@ def _check_once(
     task has (the same record sent twice at once: the other request stored it meanwhile)."""
     if record_["state"] != RunState.FINISHED.value:
         return None
-    other = db.session.scalar(
-        select(Run).where(
-            Run.task_id == task.id,
-            Run.state == RunState.FINISHED,
-            Run.invalidated_at.is_(None),
-        )
-    )
+    other = counted_run(task.id)
     if other is None:
         return None
     if (other.instance_id, other.remote_run_id) == (instance.id, remote_id):

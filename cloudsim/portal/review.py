@@ -14,7 +14,7 @@ from cloudsim.competition.runs import get_run
 from cloudsim.errors import Conflict, InvalidInput
 from cloudsim.extensions import db
 from cloudsim.models import PortalRefusal, Role, Run, RunState, TeamInstance, utcnow
-from cloudsim.portal.ingest import Refused
+from cloudsim.portal.ingest import Refused, counted_run
 
 MAX_NOTE = 2000
 
@@ -55,17 +55,10 @@ def _check_counted_alone(run: Run) -> None:
     """Refuse to count a finished run again while another finished run of its task counts."""
     if run.state != RunState.FINISHED:
         return
-    other = db.session.scalar(
-        select(Run.id).where(
-            Run.task_id == run.task_id,
-            Run.id != run.id,
-            Run.state == RunState.FINISHED,
-            Run.invalidated_at.is_(None),
-        )
-    )
+    other = counted_run(run.task_id, other_than=run.id)
     if other is not None:
         raise Conflict(
-            f"run {other} of the same task counts now; invalidate it before reinstating this one"
+            f"run {other.id} of the same task counts now; invalidate it before reinstating this one"
         )
 
 
