@@ -52,7 +52,7 @@ from cloudsim.team_instances import service
 from cloudsim.team_instances.client import Endpoint, call
 from cloudsim.team_instances.poll import check_instances, endpoint_of
 from provisioners.remote import pki
-from tests.support.servers import RedisServer
+from tests.support.servers import RedisServer, bench_redis
 
 STAND_INS = 30
 USERS_PER_TEAM = 10
@@ -274,7 +274,7 @@ def main() -> None:
     if not only_stand_ins and os.geteuid() != 0:
         raise SystemExit("bench/federation.py needs root (or --stand-ins-only)")
     folder = Path(tempfile.mkdtemp(prefix="cloudsim-bench-federation-"))
-    redis = RedisServer(folder / "redis")
+    redis = bench_redis(folder)
     try:
         sizes = stand_ins(folder, redis)
         real = None if only_stand_ins else real_instances(folder, redis)

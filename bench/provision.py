@@ -26,7 +26,7 @@ from cloudsim.models import Job
 from cloudsim.providers.service import open_provider
 from constellations.definition import load_kind
 from constellations.plans.software import build_wheelhouse, distribution_source
-from tests.support.servers import RedisServer
+from tests.support.servers import bench_redis
 
 
 def wait(job_ids: list[str]) -> float:
@@ -55,7 +55,7 @@ def main() -> None:
     if os.geteuid() != 0:
         raise SystemExit("bench/provision.py needs root (the local provider makes namespaces)")
     instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-provision-"))
-    redis = RedisServer(instance / "redis")
+    redis = bench_redis(instance)
     env = {
         "CLOUDSIM_INSTANCE_DIR": str(instance),
         "CLOUDSIM_REDIS_URL": redis.url(),

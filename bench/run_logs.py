@@ -35,7 +35,7 @@ from cloudsim.models import Job, Run, RunState, Task, Team, utcnow
 from cloudsim.providers.service import open_provider
 from provisioners.remote.ssh import SSHTarget
 from provisioners.remote.ssh.openssh import OpenSSH
-from tests.support.servers import RedisServer
+from tests.support.servers import bench_redis
 
 
 def main() -> None:
@@ -46,7 +46,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3, help="pipe + collection pairs")
     arguments = parser.parse_args()
     instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-logs-"))
-    redis = RedisServer(instance / "redis")
+    redis = bench_redis(instance)
     env = {
         "CLOUDSIM_INSTANCE_DIR": str(instance),
         "CLOUDSIM_REDIS_URL": redis.url(),

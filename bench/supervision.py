@@ -45,7 +45,7 @@ from cloudsim.models import Run, RunState, Team
 from provisioners.providers.local.driver import LocalNodeDriver
 from provisioners.remote.ssh import ConnectionCache
 from tests.support.lightweight_runs import SYSTEMCTL, Host, boot_hosts, live_run
-from tests.support.servers import RedisServer
+from tests.support.servers import bench_redis
 
 PREFIX = "csbeatb"
 SLOW_SECONDS = 6
@@ -62,7 +62,7 @@ def main() -> None:
     args = parser.parse_args()
     print(f"load before: {_uptime()}")
     scratch = Path(tempfile.mkdtemp(prefix=f"{PREFIX}-"))
-    redis = RedisServer(scratch / "redis")
+    redis = bench_redis(scratch)
     driver = LocalNodeDriver(
         state_dir=str(scratch / "state"),
         prefix=PREFIX,

@@ -42,7 +42,7 @@ from cloudsim.extensions import db
 from cloudsim.models import Role, Run, RunState, Task, Team, User, utcnow
 from cloudsim.viewer.live import store_frame
 from tests.competition.support import store_log
-from tests.support.servers import RedisServer
+from tests.support.servers import bench_redis
 
 PASSWORD = "benchmark password"
 POLL_S = 0.5  # what viewer.js does with the default CLOUDSIM_VIEWER_POLL_MS (2 x 250 ms)
@@ -246,7 +246,7 @@ def main() -> None:
         f"{rtf['with']:.2f} with one (ratio {rtf['with'] / rtf['without']:.3f})"
     )
     instance = Path(tempfile.mkdtemp(prefix="cloudsim-bench-viewer-"))
-    redis_server = RedisServer(instance / "redis")
+    redis_server = bench_redis(instance)
     web = free_port()
     env = dict(
         os.environ,

@@ -51,7 +51,11 @@ class RedisServer:
         self.process = subprocess.Popen(
             redis_command(self.port, data_dir), stdout=subprocess.DEVNULL
         )
-        wait_for(lambda: port_accepts(self.port), 15, "redis-server")
+        try:
+            wait_for(lambda: port_accepts(self.port), 15, "redis-server")
+        except BaseException:
+            self.stop()  # a Redis that never came up is not left running
+            raise
 
     def url(self, db: int = 0) -> str:
         return f"redis://127.0.0.1:{self.port}/{db}"
@@ -59,6 +63,15 @@ class RedisServer:
     def stop(self) -> None:
         self.process.terminate()
         self.process.wait(10)
+
+
+def bench_redis(folder: Path) -> RedisServer:
+    """Start a bench's Redis in folder; remove the folder if it does not come up."""
+    try:
+        return RedisServer(folder / "redis")
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)  # a bench leaves no folder behind
+        raise
 
 
 class PostgresServer:
