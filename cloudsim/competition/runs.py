@@ -49,11 +49,7 @@ def start_run(actor: Actor, task_id: int, constellation_id: int | None = None) -
         raise Forbidden(
             f"the window of {task.name} closed at {task.window_stop:%Y-%m-%d %H:%M} UTC"
         )
-    done = db.session.scalar(
-        select(Run.id).where(Run.task_id == task.id, Run.state.in_((*LIVE, RunState.FINISHED)))
-    )
-    if done is not None:
-        raise Conflict(f"{task.name} has been run already (run {done})")
+    _refuse_if_run(task)
     constellation = _constellation_for(task, constellation_id)
     run = lifecycle.new_run(
         task_id=task.id,
@@ -65,8 +61,9 @@ def start_run(actor: Actor, task_id: int, constellation_id: int | None = None) -
     db.session.add(run)
     try:
         db.session.flush()
-    except IntegrityError:
+    except IntegrityError:  # another start of this task, or on this constellation, at once
         db.session.rollback()
+        _refuse_if_run(task)
         raise Conflict(f"{constellation.name} is busy with another run") from None
     record(
         "run.start",
@@ -79,6 +76,19 @@ def start_run(actor: Actor, task_id: int, constellation_id: int | None = None) -
     )
     lifecycle.start(actor, run)
     return run
+
+
+def task_run(task_id: int) -> int | None:
+    """Return the id of the task's live or finished run, if it has one."""
+    return db.session.scalar(
+        select(Run.id).where(Run.task_id == task_id, Run.state.in_((*LIVE, RunState.FINISHED)))
+    )
+
+
+def _refuse_if_run(task: Task) -> None:
+    done = task_run(task.id)
+    if done is not None:
+        raise Conflict(f"{task.name} has been run already (run {done})")
 
 
 def _constellation_for(task: Task, constellation_id: int | None) -> Constellation:

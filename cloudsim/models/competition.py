@@ -62,7 +62,11 @@ class RunState(enum.StrEnum):
     ERROR = "error"
 
 
-COUNTED = "state = 'finished' AND invalidated_at IS NULL"  # the one finished run of a task
+# The one run of a task that is live or counts (finished, not invalidated).
+LIVE_OR_COUNTED = (
+    "state IN ('starting', 'running', 'stopping') "
+    "OR (state = 'finished' AND invalidated_at IS NULL)"
+)
 
 
 class Run(Base):
@@ -70,19 +74,20 @@ class Run(Base):
 
     On a master, a run a team instance uploaded (cloudsim.portal) is a row like any other,
     marked with the instance and the instance's own id for it (one row per pair). A task has
-    at most one finished run that counts (not invalidated): the database holds that too, so
-    two uploads at the same instant cannot both be stored.
+    at most one run that is live or counts (finished, not invalidated): the database holds that
+    too, so two uploads, or two starts on two constellations, at the same instant cannot both
+    be stored.
     """
 
     __tablename__ = "runs"
     __table_args__ = (
         UniqueConstraint("instance_id", "remote_run_id"),
         Index(
-            "uq_runs_task_counted",
+            "uq_runs_task_live_or_counted",
             "task_id",
             unique=True,
-            sqlite_where=text(COUNTED),
-            postgresql_where=text(COUNTED),
+            sqlite_where=text(LIVE_OR_COUNTED),
+            postgresql_where=text(LIVE_OR_COUNTED),
         ),
     )
 

@@ -54,6 +54,33 @@ def test_a_team_user_starts_their_open_task_and_a_start_job_follows(
         runs.start_run(people["officer"], task.id)
 
 
+def test_two_starts_of_a_task_at_once_on_two_constellations_start_one_run(
+    app: Flask,
+    people: dict[str, User | None],
+    team_a: Team,
+    constellation: Constellation,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    db.session.add(
+        Constellation(
+            name="a-vrc-2",
+            kind="vrc",
+            provider="local",
+            team_id=team_a.id,
+            state=ConstellationState.READY,
+        )
+    )
+    task = open_task(team_a.id)
+    first = runs.start_run(people["user_a"], task.id)
+    db.session.commit()
+    # the other start looked before this one was stored: the database refuses it
+    looked, missed = runs.task_run, [None]
+    monkeypatch.setattr(runs, "task_run", lambda *a: missed.pop() if missed else looked(*a))
+    with pytest.raises(Conflict, match=f"run already \\(run {first.id}\\)"):
+        runs.start_run(people["user_a"], task.id)
+    assert db.session.query(Run).filter_by(task_id=task.id).count() == 1
+
+
 def test_the_api_refuses_starts_outside_the_window_or_by_another_team(
     app: Flask, people: dict[str, User | None], team_a: Team, constellation: Constellation
 ) -> None:

@@ -11,9 +11,12 @@ from sqlalchemy import inspect
 
 from cloudsim import migrate
 from cloudsim.app import create_app
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.extensions import db
-from cloudsim.models import Base
+from cloudsim.models import Base, Run, RunState
+from cloudsim.people.service import create_team
+from tests.competition.support import open_task
 from tests.support.servers import PostgresServer
 
 
@@ -40,4 +43,35 @@ def test_upgrade_matches_models_and_downgrade_removes_everything(
     migrate.upgrade(app)  # and back up again, as after a rollback of a release
     with app.app_context():
         assert "users" in inspect(db.engine).get_table_names()
+        db.engine.dispose()
+
+
+def test_0012_ends_a_second_live_run_of_a_task_with_the_reason(
+    make_config: Callable[..., Config],
+) -> None:
+    app = create_app(make_config())
+    migrate.upgrade(app, "0011")
+    with app.app_context():
+        team = create_team(SYSTEM, "Team A")
+        counted, raced = open_task(team.id), open_task(team.id)
+        rows = {
+            "finished": Run(task_id=counted.id, team_id=team.id, state=RunState.FINISHED),
+            "live after finished": Run(task_id=counted.id, team_id=team.id, state=RunState.RUNNING),
+            "first live": Run(task_id=raced.id, team_id=team.id, state=RunState.RUNNING),
+            "second live": Run(task_id=raced.id, team_id=team.id, state=RunState.STARTING),
+        }
+        db.session.add_all(rows.values())
+        db.session.commit()
+        ids = {name: run.id for name, run in rows.items()}
+        db.session.remove()
+    migrate.upgrade(app)
+    with app.app_context():
+        states = {name: db.session.get(Run, run_id) for name, run_id in ids.items()}
+        assert {name: run.state for name, run in states.items() if run} == {
+            "finished": RunState.FINISHED,
+            "live after finished": RunState.ERROR,
+            "first live": RunState.RUNNING,
+            "second live": RunState.ERROR,
+        }
+        assert "second live run of its task" in (states["second live"].error or "")
         db.engine.dispose()
