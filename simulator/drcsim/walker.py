@@ -302,9 +302,9 @@ class Walker:
 
     def _swing_foot(self, swing: Swing) -> Foothold:
         span = max(1, swing.last - swing.first)
-        tau = min(
-            1.0, max(0.0, (self.tick + (self.steps % TICK_STEPS) / TICK_STEPS - swing.first) / span)
-        )
+        # The same instant as the COM's interpolation (self.tick is already the next tick).
+        share = ((self.steps - 1) % TICK_STEPS + 1) / TICK_STEPS
+        tau = min(1.0, max(0.0, (self.tick - 1 + share - swing.first) / span))
         s = tau * tau * (3 - 2 * tau)
         a, b = swing.start, swing.end
         if self.adjust.any():
@@ -368,7 +368,10 @@ class Walker:
                 - self.velocity
             ) * VELOCITY_FILTER
             self.com_measured = whole
-        measured = self.com_measured + COM_VELOCITY * self.velocity / omega
+        # Between the 100 Hz measurements the COM moves on at its velocity: a correction that
+        # jumped every 10 ms jolted the stance foot (hundreds of newtons, and it spun in yaw).
+        since = ((self.steps - 1) % TICK_STEPS) * self.controller.timestep
+        measured = self.com_measured + (since + COM_VELOCITY / omega) * self.velocity
         wanted = self.com + COM_VELOCITY * ref_velocity / omega
         correction = np.clip(COM_GAIN * (measured - wanted), -CORRECTION_LIMIT, CORRECTION_LIMIT)
         target = self.com - correction
