@@ -163,6 +163,8 @@ class Walker:
         self.com_measured = self._whole_com()
         self.adjust = np.zeros(2)
         self.soft = False
+        self.correction_from = np.zeros(2)
+        self.correction_to = np.zeros(2)
 
     def _yaw(self) -> float:
         _, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
@@ -360,20 +362,24 @@ class Walker:
         # Centre-of-mass feedback: steer the pelvis against the measured COM's (and capture
         # point's) error, the COM measured from the links' poses (kinematics and IMU).
         omega = math.sqrt(9.81 / (float(self.offset[2]) + self.params.pelvis_height))
-        ref_velocity = (self.com_to - self.com_from) / (TICK_STEPS * self.controller.timestep)
-        if (self.steps - 1) % TICK_STEPS == 0:
+        share = ((self.steps - 1) % TICK_STEPS + 1) / TICK_STEPS
+        if share == 1 / TICK_STEPS:
+            ref_velocity = (self.com_to - self.com_from) / (TICK_STEPS * self.controller.timestep)
             whole = self._whole_com()
             self.velocity += (
                 (whole - self.com_measured) / (TICK_STEPS * self.controller.timestep)
                 - self.velocity
             ) * VELOCITY_FILTER
             self.com_measured = whole
-        # Between the 100 Hz measurements the COM moves on at its velocity: a correction that
-        # jumped every 10 ms jolted the stance foot (hundreds of newtons, and it spun in yaw).
-        since = ((self.steps - 1) % TICK_STEPS) * self.controller.timestep
-        measured = self.com_measured + (since + COM_VELOCITY / omega) * self.velocity
-        wanted = self.com + COM_VELOCITY * ref_velocity / omega
-        correction = np.clip(COM_GAIN * (measured - wanted), -CORRECTION_LIMIT, CORRECTION_LIMIT)
+            measured = self.com_measured + COM_VELOCITY * self.velocity / omega
+            wanted = self.com_from + COM_VELOCITY * ref_velocity / omega
+            self.correction_from = self.correction_to
+            self.correction_to = np.clip(
+                COM_GAIN * (measured - wanted), -CORRECTION_LIMIT, CORRECTION_LIMIT
+            )
+        # Measured at 100 Hz, the correction moves to its new value over the next 10 ms: one
+        # that jumped every tick jolted the stance foot (hundreds of newtons; it spun in yaw).
+        correction = self.correction_from + (self.correction_to - self.correction_from) * share
         target = self.com - correction
         return np.array([target[0] - com_to_pelvis[0], target[1] - com_to_pelvis[1], self.pelvis_z])
 
