@@ -17,6 +17,7 @@ from drcsim.control import JointController
 from drcsim.driving import VehicleDrive
 from drcsim.errors import CommandError
 from drcsim.estimator import Estimator
+from drcsim.mud import MudDrag
 from drcsim.runlog import RunLog, state_digest
 from drcsim.scene import TICK_STEPS, TIMESTEP, build_scene
 from drcsim.scoring import GateFrame, Observation, Scorer
@@ -53,6 +54,7 @@ class Simulation:
         self.controller = JointController(
             self.client, self.scene.robot, self.scene.robot_joints, TIMESTEP
         )
+        self.mud = MudDrag(self.client, self.scene.robot, self.scene.mud)
         self.drive = (
             VehicleDrive(self.client, self.scene.vehicle, self.scene.vehicle_joints)
             if self.scene.vehicle is not None
@@ -141,6 +143,7 @@ class Simulation:
         while done < count and not self.ended:
             self.behaviours.apply()
             self.controller.apply()
+            self.mud.apply(self.step_count, TIMESTEP)
             self.client.stepSimulation()
             self.step_count += 1
             done += 1

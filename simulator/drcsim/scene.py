@@ -13,12 +13,14 @@ import numpy as np
 from drcsim._bullet import BulletClient, pybullet
 from drcsim.errors import WorldError
 from drcsim.models import humanoid, props, vehicle
+from drcsim.mud import MudPit
 from drcsim.urdf import Robot
 from drcsim.worlds import WorldSpec
 
 TIMESTEP = 0.001
 TICK_STEPS = 10  # physics steps per 100 Hz tick: scoring, state log, clock, walking pattern
 SOLVER_ITERATIONS = 20
+MUD_BOTTOM = 0.002  # m: the top of a mud pit's firm bottom over the ground
 MODEL_CACHE = Path(tempfile.gettempdir()) / "drcsim-models"
 
 
@@ -73,6 +75,7 @@ class Scene:
     gates: dict[str, Gate] = field(default_factory=dict)
     terrain: list[TerrainPatch] = field(default_factory=list)
     rubble: list[int] = field(default_factory=list)
+    mud: list[MudPit] = field(default_factory=list)
     course: dict[str, Any] = field(default_factory=dict)
 
     def terrain_at(self, x: float, y: float) -> TerrainPatch | None:
@@ -133,18 +136,23 @@ def _static_box(
 
 def _mud(
     client: BulletClient, patch: dict[str, Any], centre: list[float], half: list[float]
-) -> float:
-    # A soft slab 2 cm proud of the ground: feet sink into it (contact stiffness and damping)
-    # and slip (friction); softer mud sinks deeper.
-    body = _static_box(client, [*half, 0.1], [*centre, -0.08], 0.0, [0.35, 0.25, 0.1, 1])
-    client.changeDynamics(
-        body,
-        -1,
-        lateralFriction=float(patch["friction"]),
-        contactStiffness=float(patch["stiffness"]),
-        contactDamping=float(patch["damping"]),
+) -> MudPit:
+    # As the VRC's MudPlugin: the mud's surface holds nothing up (no collision shape: links
+    # pass through it) and its drag is mud.MudDrag's; feet stand on the firm bottom, a rigid
+    # box with the mud's friction whose top is MUD_BOTTOM over the ground (so that the plane
+    # under it never touches a foot on it, and a sole across the rim barely tilts).
+    depth = float(patch["depth"])
+    bottom = _static_box(
+        client, [*half, 0.05], [*centre, MUD_BOTTOM - 0.05], 0.0, [0.3, 0.22, 0.1, 1]
     )
-    return 0.02
+    client.changeDynamics(bottom, -1, lateralFriction=float(patch["friction"]))
+    visual = client.createVisualShape(
+        pybullet.GEOM_BOX, halfExtents=[*half, depth / 2], rgbaColor=[0.4, 0.3, 0.12, 0.6]
+    )
+    client.createMultiBody(0, -1, visual, [*centre, MUD_BOTTOM + depth / 2])
+    lower = (centre[0] - half[0], centre[1] - half[1])
+    upper = (centre[0] + half[0], centre[1] + half[1])
+    return MudPit(lower, upper, MUD_BOTTOM, MUD_BOTTOM + depth, float(patch["damping"]))
 
 
 def _rubble(
@@ -214,7 +222,9 @@ def _build_terrain(client: BulletClient, spec: WorldSpec, scene: Scene) -> None:
         half = [(upper[0] - lower[0]) / 2, (upper[1] - lower[1]) / 2]
         height, ramp = 0.0, 0.0
         if patch["kind"] == "mud":
-            height = _mud(client, patch, centre, half)
+            pit = _mud(client, patch, centre, half)
+            scene.mud.append(pit)
+            height = pit.bottom
         elif patch["kind"] == "rubble":
             pass  # loose blocks come after the robot (see build_scene)
         elif patch["kind"] == "hill":

@@ -23,7 +23,6 @@ from drcsim.gait import (
     GaitParameters,
     PreviewAxis,
     Swing,
-    capture_step,
     leg_ik,
     plan_poses,
     rotation,
@@ -59,15 +58,6 @@ YAW_TOLERANCE = 0.08
 MAX_REPLANS = 3  # plans without progress before the walk gives up
 SWING_FROM_ACTUAL = 0.5  # share of the pelvis's tracking error the swing foot allows for
 PLAN_STEPS = 8  # steps planned at a time: then both feet down and a fresh plan
-# On soft ground (mud) the stance foot tips in the slab and the ankle cannot hold the body
-# up by itself: a softer ankle roll, the swing foot placed from the pelvis's real pose, and
-# capture-point stepping (the landing moves by the capture point's error).
-SOFT_ANKLE_ROLL = 800.0  # N m/rad
-# ...which takes a larger roll correction from the IMU to push as hard as the stiff one did
-# (with 1.0 the body rolled about 0.1 rad towards the swing foot at every step in the mud).
-SOFT_ROLL_TILT_GAIN = 3.0
-STEP_GAIN = 1.0  # landing shift per metre of capture-point error
-STEP_FREEZE = 0.75  # share of the swing after which its landing point stays put
 HIPS = {  # each hip joint in the pelvis frame (the right one mirrored)
     side: np.array([HIP_OFFSET[0], sign * HIP_OFFSET[1], HIP_OFFSET[2]])
     for side, sign in (("left", 1.0), ("right", -1.0))
@@ -161,8 +151,6 @@ class Walker:
         self.tilt = 0.0
         self.active: Swing | None = None
         self.com_measured = self._whole_com()
-        self.adjust = np.zeros(2)
-        self.soft = False
         self.correction_from = np.zeros(2)
         self.correction_to = np.zeros(2)
 
@@ -223,14 +211,8 @@ class Walker:
         self.com_from = self.com_to
         self.com_to = np.array([self.axes[0].step(future[:, 0]), self.axes[1].step(future[:, 1])])
         self.active = next((w for w in self.swings if w.first <= self.tick < w.last), None)
-        self._check_ground()
-        if self.active is not None and self.soft:
-            self._place_step(self.active)
         for swing in self.swings:
             if swing.last == self.tick:
-                if self.adjust.any():
-                    self._shift_plan(swing, self.adjust)
-                    self.adjust = np.zeros(2)
                 self.feet[swing.side] = swing.end
         if self.zmp and self.tick >= len(self.zmp) - 1:
             self._finish()
@@ -255,53 +237,6 @@ class Walker:
         else:
             self.status, self.goal = f"blocked: {off:.2f} m short of the goal", None
 
-    def _check_ground(self) -> None:
-        """Switch the soft-ground mode when a foot stands on (or leaves) mud."""
-        soft = False
-        for foot in self.feet.values():
-            patch = self.scene.terrain_at(foot.x, foot.y)
-            soft = soft or (patch is not None and patch.kind == "mud")
-        if soft != self.soft:
-            self.soft = soft
-            kp, kd = GAINS["akx"]
-            for names in LEGS.values():
-                self.controller.set_gains(names[5], SOFT_ANKLE_ROLL if soft else kp, 0.0, kd)
-
-    def _place_step(self, swing: Swing) -> None:
-        """Capture-point stepping: move the landing point by the capture point's error."""
-        span = max(1, swing.last - swing.first)
-        if (self.tick - swing.first) / span > STEP_FREEZE:
-            return
-        omega = math.sqrt(9.81 / (float(self.offset[2]) + self.params.pelvis_height))
-        ref_velocity = (self.com_to - self.com_from) / (TICK_STEPS * self.controller.timestep)
-        error = (self.com_measured + self.velocity / omega) - (self.com + ref_velocity / omega)
-        stance = self.feet["left" if swing.side == "right" else "right"]
-        self.adjust = capture_step(STEP_GAIN * error, swing.end, stance, swing.side)
-
-    def _shift_plan(self, landed: Swing, delta: np.ndarray) -> None:
-        """Move the rest of the plan by where the step really landed: walk on from there."""
-        dx, dy = float(delta[0]), float(delta[1])
-        ground = self.scene.ground_height
-
-        def moved(f: Foothold) -> Foothold:
-            return Foothold(f.x + dx, f.y + dy, ground(f.x + dx, f.y + dy), f.yaw)
-
-        other_seen = False
-        for swing in self.swings:
-            if swing.first < landed.last:
-                continue
-            if swing.side != landed.side and not other_seen:
-                other_seen = True  # the other foot's next step starts where it stands
-            else:
-                swing.start = moved(swing.start)
-            swing.end = moved(swing.end)
-        landed.end = moved(landed.end)
-        ramp = max(1, round(self.params.double_support / PREVIEW_DT))
-        for i in range(self.tick, len(self.zmp)):
-            share = min(1.0, (i - self.tick + 1) / ramp)
-            x, y = self.zmp[i]
-            self.zmp[i] = (x + dx * share, y + dy * share)
-
     def _swing_foot(self, swing: Swing) -> Foothold:
         span = max(1, swing.last - swing.first)
         # The same instant as the COM's interpolation (self.tick is already the next tick).
@@ -309,9 +244,6 @@ class Walker:
         tau = min(1.0, max(0.0, (self.tick - 1 + share - swing.first) / span))
         s = tau * tau * (3 - 2 * tau)
         a, b = swing.start, swing.end
-        if self.adjust.any():
-            x, y = b.x + float(self.adjust[0]), b.y + float(self.adjust[1])
-            b = Foothold(x, y, self.scene.ground_height(x, y), b.yaw)
         dyaw = wrap_angle(b.yaw - a.yaw)
         lift = self.params.step_height * math.sin(math.pi * tau)
         return Foothold(
@@ -346,10 +278,6 @@ class Walker:
             if swing is not None and swing.side == side:
                 # The swing foot goes to its world target from where the pelvis really is.
                 base = np.array(where)
-                if self.soft:  # all of where the pelvis really is, and how it is tilted
-                    tilted = rotation(roll, pitch, yaw)
-                    self._leg(side, foot, base, tilted, (0.0, 0.0), (0.0, 0.0))
-                    continue
                 real = pelvis + SWING_FROM_ACTUAL * (base - pelvis) * HORIZONTAL
                 self._leg(side, foot, real, body, (0.0, 0.0), (roll, pitch))
             else:
@@ -397,7 +325,7 @@ class Walker:
         ankle = np.array([foot.x, foot.y, foot.z + ANKLE_TO_SOLE])
         angles = np.array(leg_ik(hip, body, ankle, rotation(0.0, 0.0, foot.yaw)))
         angles[4] += TILT_GAIN * ankle_tilt[1]  # stance ankle: the ankle strategy
-        angles[5] += ankle_tilt[0] * (SOFT_ROLL_TILT_GAIN if self.soft else TILT_GAIN)
+        angles[5] += TILT_GAIN * ankle_tilt[0]
         angles[2] += TILT_GAIN * hip_tilt[1] * 0.5
         angles[1] += TILT_GAIN * hip_tilt[0] * 0.5
         self.controller.set_slot_positions(self.slots[side], angles)

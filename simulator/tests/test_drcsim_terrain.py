@@ -1,10 +1,13 @@
-"""Terrain that matters: loose rubble, soft mud, slopes; configurations 1..5 get harder."""
+"""Terrain that matters: loose rubble, mud, slopes; configurations 1..5 get harder."""
 
 from __future__ import annotations
 
 import itertools
 
 import pytest
+from drcsim.local import LocalClient
+from drcsim.mud import MudDrag
+from drcsim.scene import MUD_BOTTOM
 from drcsim.worlds import CONFIG_NAMES, load_world
 
 
@@ -17,7 +20,8 @@ def test_walking_configurations_get_harder_from_1_to_5() -> None:
     def rising(values: list[float]) -> bool:
         return all(a < b for a, b in itertools.pairwise(values))
 
-    assert rising([-m["friction"] for m in mud]) and rising([-m["stiffness"] for m in mud])
+    assert rising([-m["friction"] for m in mud]) and rising([m["depth"] for m in mud])
+    assert rising([m["damping"] for m in mud])
     assert rising([r["blocks"] for r in rubble]) and rising([r["max_height"] for r in rubble])
     assert rising([h["slope"] for h in hill]) and rising([h["rise"] for h in hill])
     assert rising([-s.ground_friction for s in specs[1:]])
@@ -50,3 +54,47 @@ def test_the_hill_surface_is_where_the_terrain_says(make_sim) -> None:
         hit = sim.client.rayTest([x, 0.3, 2.0], [x, 0.3, -1.0])[0]
         assert hit[3][2] == pytest.approx(expected, abs=0.01)
     assert sim.scene.ground_height(17.5, 0.0) == pytest.approx(hill["rise"])
+
+
+def test_feet_sink_through_the_mud_and_stand_on_its_firm_bottom(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "5")
+    client, robot, pit = sim.client, sim.scene.robot, sim.scene.mud[0]
+    pos, orn = client.getBasePositionAndOrientation(robot)
+    client.resetBasePositionAndOrientation(robot, [7.0, 0.0, pos[2] + 0.05], orn)
+    LocalClient(sim).behaviour("stand", balance="joints")
+    sim.step(800)
+    for side in ("l_foot", "r_foot"):
+        lower, upper = client.getAABB(robot, sim.scene.robot_links[side])
+        assert lower[2] == pytest.approx(MUD_BOTTOM, abs=2e-3)  # on the bottom, not the surface
+        assert upper[2] < pit.surface
+    dragged = dict(sim.mud.dragged)  # feet and shins are in the mud, nothing else
+    assert sim.scene.robot_links["l_foot"] in dragged and len(dragged) <= 6
+    assert sum(dragged.values()) == pytest.approx(2 * pit.damping, rel=0.15)  # both legs
+
+
+def _slide(sim, x: float) -> float:
+    """Return how far a 2.4 kg box (a foot) slides from x at 1 m/s, mud-dragged as a link."""
+    client = sim.client
+    shape = client.createCollisionShape(client.GEOM_BOX, halfExtents=[0.13, 0.065, 0.025])
+    box = client.createMultiBody(2.4, shape, -1, [x, 0.0, 0.03])
+    drag = MudDrag(client, box, sim.scene.mud)
+    for step in range(100):
+        drag.apply(step, 0.001)
+        client.stepSimulation()
+    client.resetBaseVelocity(box, [1.0, 0.0, 0.0])
+    start = client.getBasePositionAndOrientation(box)[0][0]
+    speeds = []
+    for step in range(100, 400):
+        drag.apply(step, 0.001)
+        client.stepSimulation()
+        speeds.append(client.getBaseVelocity(box)[0][0])
+    # Only ever slowed (to within the contact solver's jitter at rest).
+    assert all(-1e-4 <= b <= a + 1e-4 for a, b in itertools.pairwise(speeds))
+    assert (drag.dragged != []) == (x > 5.0)  # no drag outside the pit
+    return client.getBasePositionAndOrientation(box)[0][0] - start
+
+
+def test_the_mud_drags_at_what_moves_in_it_and_nothing_outside(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "1")
+    paved, mud = _slide(sim, 2.0), _slide(sim, 7.0)  # both on friction 1.0
+    assert 0.0 < mud < 0.8 * paved

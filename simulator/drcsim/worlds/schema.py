@@ -17,7 +17,7 @@ from drcsim.errors import WorldError
 MODELS = ("gate", "vehicle", "table", "hose", "standpipe")
 # terrain kind -> the fields scene.py reads (besides id, kind, min, max, walk_speed)
 TERRAIN_FIELDS = {
-    "mud": ("friction", "stiffness", "damping"),
+    "mud": ("friction", "depth", "damping"),
     "rubble": ("blocks", "max_height", "friction"),
     "hill": ("rise", "slope"),
 }
