@@ -2,19 +2,21 @@
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 
 import pytest
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
-from sqlalchemy import inspect
+from drcsim.worlds import document_digest, shipped_document
+from sqlalchemy import inspect, select
 
 from cloudsim import migrate
 from cloudsim.app import create_app
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.extensions import db
-from cloudsim.models import Base, Run, RunState
+from cloudsim.models import Base, Run, RunState, World
 from cloudsim.people.service import create_team
 from tests.competition.support import open_task
 from tests.support.servers import PostgresServer
@@ -74,4 +76,32 @@ def test_0012_ends_a_second_live_run_of_a_task_with_the_reason(
             "second live": RunState.ERROR,
         }
         assert "second live run of its task" in (states["second live"].error or "")
+        db.engine.dispose()
+
+
+def test_0013_gives_stored_worlds_with_the_old_soft_mud_the_shipped_mud(
+    make_config: Callable[..., Config],
+) -> None:
+    shipped = shipped_document("vrc_task_2")
+    old = copy.deepcopy(shipped)
+    configs = old["configs"].values()
+    for patch in [old["terrain"][0], *(c.get("terrain", {}).get("mud", {}) for c in configs)]:
+        patch.pop("depth", None)
+        if "friction" in patch:
+            patch.update(friction=0.3, stiffness=20000.0)
+    assert old["terrain"][0]["kind"] == "mud" and old != shipped
+    app = create_app(make_config())
+    migrate.upgrade(app, "0012")
+    with app.app_context():
+        world = db.session.scalars(select(World).where(World.name == "vrc_task_2")).one()
+        world.document, world.digest = old, document_digest(old)
+        db.session.commit()
+        db.session.remove()
+    migrate.upgrade(app)
+    with app.app_context():
+        world = db.session.scalars(select(World).where(World.name == "vrc_task_2")).one()
+        assert world.document == shipped and world.version == 2
+        assert world.digest == document_digest(shipped)
+        others = db.session.scalars(select(World).where(World.name != "vrc_task_2")).all()
+        assert {w.version for w in others} == {1}  # no mud: untouched
         db.engine.dispose()
