@@ -177,8 +177,8 @@ class GaitParameters:
 
     step_length: float = 0.25  # m per step
     step_height: float = 0.06  # m of swing-foot clearance
-    step_time: float = 0.8  # s of single support per step (shorter: faster)
-    double_support: float = 0.6  # s with both feet down between steps
+    step_time: float = 0.6  # s of single support per step (shorter: faster)
+    double_support: float = 0.3  # s with both feet down between steps
     stance_width: float = 0.18  # m between the ankles
     pelvis_height: float = 0.89  # m above the feet
 

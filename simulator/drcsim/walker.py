@@ -10,6 +10,7 @@ but gravity, contacts and its joints: walking too fast, on rubble or a slope can
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -57,12 +58,16 @@ POSITION_TOLERANCE = 0.05
 YAW_TOLERANCE = 0.08
 MAX_REPLANS = 3  # plans without progress before the walk gives up
 SWING_FROM_ACTUAL = 0.5  # share of the pelvis's tracking error the swing foot allows for
-PLAN_STEPS = 8  # steps planned at a time: then both feet down and a fresh plan
+PLAN_STEPS = 30  # steps planned at a time: then both feet down and a fresh plan
+SOFT_PLAN_STEPS = 8  # ...in mud, where the feet stray further from the plan
+SOFT_PACE = (0.8, 0.6)  # s: in mud, single support and double support at least
 HIPS = {  # each hip joint in the pelvis frame (the right one mirrored)
     side: np.array([HIP_OFFSET[0], sign * HIP_OFFSET[1], HIP_OFFSET[2]])
     for side, sign in (("left", 1.0), ("right", -1.0))
 }
 HORIZONTAL = np.array([1.0, 1.0, 0.0])
+LIFT_POWER = 2
+SWING_YAW = True
 
 
 class Walker:
@@ -161,7 +166,7 @@ class Walker:
     # -- planning -------------------------------------------------------------------------
     def walk_to(self, goal: tuple[float, float, float], params: GaitParameters) -> None:
         """Plan footsteps from where the feet are to `goal` (pelvis x, y, yaw) and start."""
-        self.params = params.checked()
+        self.asked = params.checked()
         self.goal = goal
         self.feet = {side: self._foot(side) for side in ("left", "right")}
         # Start from the measured centre of mass, at rest (the robot stands on both feet).
@@ -174,15 +179,36 @@ class Walker:
         self.start_distance = math.hypot(goal[0] - pos[0], goal[1] - pos[1])
         left, right = self.feet["left"], self.feet["right"]
         mid = ((left.x + right.x) / 2, (left.y + right.y) / 2, self._mid_yaw())
-        # A few steps at a time, then both feet down and a fresh plan from where the feet
-        # really are: errors do not pile up over a long walk.
-        poses = plan_poses(mid, goal, self.params.step_length)[:PLAN_STEPS]
+        # A stretch at a time, then both feet down and a fresh plan from where the feet
+        # really are: errors do not pile up over a long walk. A stretch ends where the
+        # ground changes, and on soft ground the walker keeps to a slower pace.
+        poses = plan_poses(mid, goal, self.asked.step_length)
+        kinds = [self._ground_kind(x, y) for x, y, _ in poses]
+        here = self._ground_kind(mid[0], mid[1])
+        moved = [math.hypot(x - mid[0], y - mid[1]) > POSITION_TOLERANCE for x, y, _ in poses]
+        count = next(
+            (i for i in range(1, len(poses)) if kinds[i] != kinds[i - 1] and moved[i - 1]),
+            len(poses),
+        )
+        soft = here == "mud" or "mud" in kinds[:count]
+        poses = poses[: max(1, min(count, SOFT_PLAN_STEPS if soft else PLAN_STEPS))]
+        self.params = self.asked
+        if soft:
+            self.params = replace(
+                self.asked,
+                step_time=max(self.asked.step_time, SOFT_PACE[0]),
+                double_support=max(self.asked.double_support, SOFT_PACE[1]),
+            )
         start = (float(self.com[0]), float(self.com[1]))
         self.zmp, self.swings = timeline(
             self.feet, poses, self.params, start, self.scene.ground_height
         )
         self.tick = 0
         self.status = "walking"
+
+    def _ground_kind(self, x: float, y: float) -> str:
+        patch = self.scene.terrain_at(x, y)
+        return "paved" if patch is None else patch.kind
 
     def _mid_yaw(self) -> float:
         a, b = self.feet["left"].yaw, self.feet["right"].yaw
@@ -233,7 +259,7 @@ class Walker:
             # Progress, or a few tries at the last centimetres: plan the next stretch.
             if off >= self.start_distance - 0.1:
                 self.replans += 1
-            self.walk_to(self.goal, self.params)
+            self.walk_to(self.goal, self.asked)
         else:
             self.status, self.goal = f"blocked: {off:.2f} m short of the goal", None
 
@@ -245,7 +271,7 @@ class Walker:
         s = tau * tau * (3 - 2 * tau)
         a, b = swing.start, swing.end
         dyaw = wrap_angle(b.yaw - a.yaw)
-        lift = self.params.step_height * math.sin(math.pi * tau)
+        lift = self.params.step_height * math.sin(math.pi * tau) ** LIFT_POWER
         return Foothold(
             a.x + (b.x - a.x) * s,
             a.y + (b.y - a.y) * s,
@@ -272,14 +298,15 @@ class Walker:
         pelvis = self._pelvis_target(body)
         # Balance from the IMU: tilt the legs against the pelvis's roll and pitch.
         where, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
-        roll, pitch, _ = self.client.getEulerFromQuaternion(orn)
+        roll, pitch, real_yaw = self.client.getEulerFromQuaternion(orn)
         self.tilt = math.hypot(roll, pitch)
         for side, foot in feet.items():
             if swing is not None and swing.side == side:
                 # The swing foot goes to its world target from where the pelvis really is.
                 base = np.array(where)
                 real = pelvis + SWING_FROM_ACTUAL * (base - pelvis) * HORIZONTAL
-                self._leg(side, foot, real, body, (0.0, 0.0), (roll, pitch))
+                turned = rotation(0.0, 0.0, real_yaw) if SWING_YAW else body
+                self._leg(side, foot, real, turned, (0.0, 0.0), (roll, pitch))
             else:
                 self._leg(side, foot, pelvis, body, (roll, pitch), (roll, pitch))
         self.controller.set_slot_positions(self.trunk_slots, np.zeros(len(TRUNK)))
