@@ -97,3 +97,19 @@ def test_the_walker_walks_on_in_deep_mud_that_drags_at_its_legs(make_sim) -> Non
         dragged |= {link for link, _ in sim.mud.dragged}
     assert feet < dragged  # the feet (and shins) were in the mud
     assert state["score"]["falls"] == 0 and _pelvis(sim)[0] > 7.1
+
+
+def test_the_walker_turns_then_walks_on_its_new_heading(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "1")
+    client = LocalClient(sim)
+    for pose in ([0.0, 0.0, 0.6], [1.65, 1.13, 0.6]):  # a turn in place, then 2 m along it
+        client.behaviour("walk", pose=pose, balance="joints")
+        for _ in range(40):
+            state = client.step(500)
+            if state["behaviour"]["walk"] != "walking":
+                break
+        assert state["behaviour"]["walk"] == "done" and state["score"]["falls"] == 0
+    x, y, _ = _pelvis(sim)
+    orn = sim.client.getBasePositionAndOrientation(sim.scene.robot)[1]
+    assert math.hypot(x - 1.65, y - 1.13) <= 0.05
+    assert abs(sim.client.getEulerFromQuaternion(orn)[2] - 0.6) <= 0.08
