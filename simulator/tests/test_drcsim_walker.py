@@ -113,3 +113,18 @@ def test_the_walker_turns_then_walks_on_its_new_heading(make_sim) -> None:
     orn = sim.client.getBasePositionAndOrientation(sim.scene.robot)[1]
     assert math.hypot(x - 1.65, y - 1.13) <= 0.05
     assert abs(sim.client.getEulerFromQuaternion(orn)[2] - 0.6) <= 0.08
+
+
+def test_the_walker_climbs_the_steepest_hill_with_its_soles_on_the_slope(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "5")  # the hill: 10 degrees up to 0.2 m, from x = 16.3
+    client, robot = sim.client, sim.scene.robot
+    pos, _ = client.getBasePositionAndOrientation(robot)
+    client.resetBasePositionAndOrientation(robot, [16.0, 0.0, pos[2] + 0.02], [0, 0, 0, 1])
+    api = LocalClient(sim)
+    api.behaviour("walk", pose=[17.6, 0.0, 0.0], balance="joints")
+    for _ in range(30):
+        state = api.step(500)
+        if not state["behaviour"]["walk"].startswith("walking"):
+            break
+    assert state["behaviour"]["walk"] == "done" and state["score"]["falls"] == 0
+    assert _pelvis(sim)[2] > 0.2 + 0.85  # up on the hill's top
