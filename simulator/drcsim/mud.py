@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from drcsim._bullet import BulletClient
+from drcsim._bullet import BulletClient, pybullet
 
 REFRESH_STEPS = 10  # physics steps between looks at which links are in the mud (100 Hz)
 # Share of a link's velocity the drag may take away in one physics step: explicit damping
@@ -23,6 +23,7 @@ MAX_VELOCITY_SHARE = 0.5
 # Links with less of the depth in the mud than this (an ankle's 2 mm talus) are not worth
 # their cost: each dragged link costs an engine call per physics step.
 MIN_IMMERSION = 0.05
+WORLD_FRAME = pybullet.WORLD_FRAME
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,7 @@ class MudDrag:
         count = client.getNumJoints(body)
         self.masses = {link: client.getDynamicsInfo(body, link)[0] for link in range(-1, count)}
         self.dragged: list[tuple[int, float]] = []  # (link, N s/m); -1 is the base
+        self.scales: list[tuple[int, float]] = []  # the same, each bounded for its mass
 
     def refresh(self) -> None:
         """Find the links in the mud and the drag on each (by how deep it is in)."""
@@ -79,19 +81,23 @@ class MudDrag:
         """Set this physics step's drag forces (a step's external forces last one step)."""
         if self.pits and step % REFRESH_STEPS == 0:
             self.refresh()
-        if not self.dragged:
+            # Never more than takes MAX_VELOCITY_SHARE of the link's own momentum in a step.
+            self.scales = [
+                (link, min(damping, MAX_VELOCITY_SHARE * self.masses[link] / timestep))
+                for link, damping in self.dragged
+            ]
+        if not self.scales:
             return
         client, body = self.client, self.body
-        links = [link for link, _ in self.dragged if link >= 0]
-        states = client.getLinkStates(body, links, computeLinkVelocity=1) if links else []
-        by_link = dict(zip(links, states, strict=True))
-        for link, damping in self.dragged:
+        links = [link for link, _ in self.scales if link >= 0]
+        states = iter(client.getLinkStates(body, links, computeLinkVelocity=1) if links else [])
+        for link, scale in self.scales:
             if link < 0:
                 where = client.getBasePositionAndOrientation(body)[0]
-                velocity = client.getBaseVelocity(body)[0]
+                vx, vy, vz = client.getBaseVelocity(body)[0]
             else:
-                where, velocity = by_link[link][0], by_link[link][6]
-            # Never more than takes MAX_VELOCITY_SHARE of the link's own momentum in a step.
-            scale = min(damping, MAX_VELOCITY_SHARE * self.masses[link] / timestep)
-            force = [-scale * v for v in velocity]
-            client.applyExternalForce(body, link, force, where, client.WORLD_FRAME)
+                state = next(states)
+                where, (vx, vy, vz) = state[0], state[6]
+            client.applyExternalForce(
+                body, link, (-scale * vx, -scale * vy, -scale * vz), where, WORLD_FRAME
+            )
