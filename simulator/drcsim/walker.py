@@ -58,6 +58,9 @@ YAW_TOLERANCE = 0.08
 MAX_REPLANS = 3  # plans without progress before the walk gives up
 SWING_FROM_ACTUAL = 0.5  # share of the pelvis's tracking error the swing foot allows for
 PLAN_STEPS = 30  # steps planned at a time: then both feet down and a fresh plan
+TOUCH_FORCE = 150.0  # N on the descending swing foot that count as its touchdown...
+TOUCH_HEIGHT = 0.015  # m ...when it is this much above the ground it was planned on
+SLOPE_SPAN = 0.1  # m either side of a foot over which the slope under it is taken
 HIPS = {  # each hip joint in the pelvis frame (the right one mirrored)
     side: np.array([HIP_OFFSET[0], sign * HIP_OFFSET[1], HIP_OFFSET[2]])
     for side, sign in (("left", 1.0), ("right", -1.0))
@@ -153,6 +156,8 @@ class Walker:
         self.com_measured = self._whole_com()
         self.correction_from = np.zeros(2)
         self.correction_to = np.zeros(2)
+        self.touched: Foothold | None = None
+        self.touched_swing: Swing | None = None
 
     def _yaw(self) -> float:
         _, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
@@ -211,13 +216,41 @@ class Walker:
         self.com_from = self.com_to
         self.com_to = np.array([self.axes[0].step(future[:, 0]), self.axes[1].step(future[:, 1])])
         self.active = next((w for w in self.swings if w.first <= self.tick < w.last), None)
+        if self.active is not None:
+            self._check_touchdown(self.active)
         for swing in self.swings:
             if swing.last == self.tick:
+                if swing is self.touched_swing and self.touched is not None:
+                    self._land(swing, self.touched)
                 self.feet[swing.side] = swing.end
         if self.zmp and self.tick >= len(self.zmp) - 1:
             self._finish()
         else:
             self.tick += 1
+
+    def _check_touchdown(self, swing: Swing) -> None:
+        """Stop lowering the swing foot where it meets something (a block, a bump)."""
+        if swing is self.touched_swing:
+            return
+        span = max(1, swing.last - swing.first)
+        if (self.tick - swing.first) / span < 0.5:
+            return  # rising: a touch now is a stub, not a landing
+        link = self.links[swing.side]
+        force = sum(point[9] for point in self.client.getContactPoints(self.scene.robot, -1, link))
+        real = self._foot(swing.side)
+        # Only a touch above the planned ground counts: on the plan's ground the step ends
+        # as planned (taking where the foot touched there let errors pile up step by step).
+        if force > TOUCH_FORCE and real.z > swing.end.z + TOUCH_HEIGHT:
+            self.touched_swing = swing
+            self.touched = Foothold(real.x, real.y, real.z, swing.end.yaw)
+
+    def _land(self, swing: Swing, where: Foothold) -> None:
+        """The step ended where the foot touched down: the foot's next step starts there."""
+        swing.end = where
+        later = [w for w in self.swings if w.side == swing.side and w.first > swing.first]
+        if later:
+            later[0].start = where
+        self.touched, self.touched_swing = None, None
 
     def _finish(self) -> None:
         self.zmp, self.swings, self.tick = [], [], 0
@@ -238,6 +271,8 @@ class Walker:
             self.status, self.goal = f"blocked: {off:.2f} m short of the goal", None
 
     def _swing_foot(self, swing: Swing) -> Foothold:
+        if swing is self.touched_swing and self.touched is not None:
+            return self.touched
         span = max(1, swing.last - swing.first)
         # The same instant as the COM's interpolation (self.tick is already the next tick).
         share = ((self.steps - 1) % TICK_STEPS + 1) / TICK_STEPS
@@ -326,8 +361,9 @@ class Walker:
     ) -> None:
         """Set one leg's joint targets (IK plus tilt feedback) and velocity feed-forward."""
         hip = pelvis + body @ HIPS[side]
-        ankle = np.array([foot.x, foot.y, foot.z + ANKLE_TO_SOLE])
-        angles = np.array(leg_ik(hip, body, ankle, rotation(0.0, 0.0, foot.yaw)))
+        sole = self._sole(foot)
+        ankle = np.array([foot.x, foot.y, foot.z]) + sole @ np.array([0.0, 0.0, ANKLE_TO_SOLE])
+        angles = np.array(leg_ik(hip, body, ankle, sole))
         angles[4] += TILT_GAIN * ankle_tilt[1]  # stance ankle: the ankle strategy
         angles[5] += TILT_GAIN * ankle_tilt[0]
         angles[2] += TILT_GAIN * hip_tilt[1] * 0.5
@@ -338,6 +374,21 @@ class Walker:
         velocity = (angles - previous) / self.controller.timestep
         self.controller.target_velocity[self.slots[side]] = velocity
         self.last_angles[side] = angles
+
+    def _sole(self, foot: Foothold) -> np.ndarray:
+        """Return the foot's rotation lying flat on the slope under it (a hill's ramp)."""
+        patch = self.scene.terrain_at(foot.x, foot.y)
+        if patch is None or patch.kind != "hill":
+            return rotation(0.0, 0.0, foot.yaw)
+        c, s, d = math.cos(foot.yaw), math.sin(foot.yaw), SLOPE_SPAN
+        height = self.scene.ground_height
+        along = (
+            height(foot.x + c * d, foot.y + s * d) - height(foot.x - c * d, foot.y - s * d)
+        ) / (2 * d)
+        across = (
+            height(foot.x - s * d, foot.y + c * d) - height(foot.x + s * d, foot.y - c * d)
+        ) / (2 * d)
+        return rotation(math.atan(across), -math.atan(along), foot.yaw)
 
     def release(self) -> None:
         """Give the legs back: stock gains, no velocity feed-forward."""

@@ -16,6 +16,16 @@ def _pelvis(sim) -> tuple[float, ...]:
     return tuple(sim.client.getBasePositionAndOrientation(sim.scene.robot)[0])
 
 
+def _walk(client: LocalClient, pose: list[float], seconds: float) -> dict:
+    """Walk to `pose` through the joints; return the state once the walk is no longer on."""
+    client.behaviour("walk", pose=pose, balance="joints")
+    for _ in range(round(seconds * 2)):
+        state = client.step(500)
+        if not state["behaviour"]["walk"].startswith("walking"):
+            break
+    return state
+
+
 def test_leg_ik_puts_the_foot_where_asked(make_sim) -> None:
     sim = make_sim("vrc_task_2", "1")
     client, robot = sim.client, sim.scene.robot
@@ -42,11 +52,7 @@ def test_standing_and_walking_through_the_joints_alone(make_sim) -> None:
     assert state["score"]["falls"] == 0 and _pelvis(sim)[2] > 0.85
     refused = client.request({"op": "joints", "position": {"l_leg_kny": 1.0}})
     assert refused["ok"] is False and "owned by stand" in refused["error"]
-    client.behaviour("walk", pose=[1.5, 0.0, 0.0], balance="joints")
-    for _ in range(60):
-        state = client.step(500)
-        if state["behaviour"]["walk"] != "walking":
-            break
+    state = _walk(client, [1.5, 0.0, 0.0], 30)
     assert state["behaviour"]["walk"] == "done" and state["score"]["falls"] == 0
     x, y, _ = _pelvis(sim)
     assert math.hypot(x - 1.5, y) <= 0.05 and not sim.behaviours.harness.active
@@ -103,13 +109,19 @@ def test_the_walker_turns_then_walks_on_its_new_heading(make_sim) -> None:
     sim = make_sim("vrc_task_2", "1")
     client = LocalClient(sim)
     for pose in ([0.0, 0.0, 0.6], [1.65, 1.13, 0.6]):  # a turn in place, then 2 m along it
-        client.behaviour("walk", pose=pose, balance="joints")
-        for _ in range(40):
-            state = client.step(500)
-            if state["behaviour"]["walk"] != "walking":
-                break
+        state = _walk(client, pose, 20)
         assert state["behaviour"]["walk"] == "done" and state["score"]["falls"] == 0
     x, y, _ = _pelvis(sim)
     orn = sim.client.getBasePositionAndOrientation(sim.scene.robot)[1]
     assert math.hypot(x - 1.65, y - 1.13) <= 0.05
     assert abs(sim.client.getEulerFromQuaternion(orn)[2] - 0.6) <= 0.08
+
+
+def test_the_walker_climbs_the_steepest_hill_with_its_soles_on_the_slope(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "5")  # the hill: 10 degrees up to 0.2 m, from x = 16.3
+    client, robot = sim.client, sim.scene.robot
+    pos, _ = client.getBasePositionAndOrientation(robot)
+    client.resetBasePositionAndOrientation(robot, [16.0, 0.0, pos[2] + 0.02], [0, 0, 0, 1])
+    state = _walk(LocalClient(sim), [17.6, 0.0, 0.0], 15)
+    assert state["behaviour"]["walk"] == "done" and state["score"]["falls"] == 0
+    assert _pelvis(sim)[2] > 0.2 + 0.85  # up on the hill's top
