@@ -24,8 +24,6 @@ ANKLE_TO_SOLE = 0.085
 ZMP_INWARD = 0.03  # m: the ZMP reference sits this far inboard of the ankle...
 ZMP_AHEAD = 0.02  # ...and this far ahead of it, mid-sole
 START_S = 0.6  # s to shift onto the first stance foot, and to settle at the end
-STEP_LIMIT = (0.12, 0.10)  # m: most capture-point stepping moves a landing forward/sideways
-MIN_WIDTH = 0.13  # m between the ankles, sideways: the feet never cross
 
 
 @cache
@@ -271,14 +269,3 @@ def timeline(
     middle = ((left[0] + right[0]) / 2, (left[1] + right[1]) / 2)
     _ramp(zmp, zmp[-1] if zmp else start, middle, round(START_S / PREVIEW_DT))
     return zmp, swings
-
-
-def capture_step(error: np.ndarray, end: Foothold, stance: Foothold, side: str) -> np.ndarray:
-    """Return the world (dx, dy) moving a landing at `end` by `error`, bounded, feet uncrossed."""
-    c, s = math.cos(end.yaw), math.sin(end.yaw)
-    forward = min(max(c * error[0] + s * error[1], -STEP_LIMIT[0]), STEP_LIMIT[0])
-    sideways = min(max(-s * error[0] + c * error[1], -STEP_LIMIT[1]), STEP_LIMIT[1])
-    sign = 1.0 if side == "left" else -1.0
-    gap = -s * (end.x - stance.x) + c * (end.y - stance.y)
-    sideways = sign * max(sign * sideways, MIN_WIDTH - sign * gap)
-    return np.array([c * forward - s * sideways, s * forward + c * sideways])
