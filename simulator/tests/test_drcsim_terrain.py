@@ -8,7 +8,7 @@ import pytest
 from drcsim.local import LocalClient
 from drcsim.mud import MudDrag
 from drcsim.scene import MUD_BOTTOM
-from drcsim.worlds import CONFIG_NAMES, load_world
+from drcsim.worlds import CONFIG_NAMES, load_world, shipped_document
 
 
 def test_walking_configurations_get_harder_from_1_to_5() -> None:
@@ -70,6 +70,23 @@ def test_feet_sink_through_the_mud_and_stand_on_its_firm_bottom(make_sim) -> Non
     dragged = dict(sim.mud.dragged)  # feet and shins are in the mud, nothing else
     assert sim.scene.robot_links["l_foot"] in dragged and len(dragged) <= 6
     assert sum(dragged.values()) == pytest.approx(2 * pit.damping, rel=0.15)  # both legs
+
+
+def test_a_robot_in_deep_mud_stands_on_its_bottom_as_documented(make_sim) -> None:
+    # Only what the README promises: a world document (`--world-file`) with 30 cm of mud under
+    # the start, and the command API. Links pass through the mud's surface: the robot stands
+    # on the bottom, as tall as on the paved lot, not on the mud.
+    document = shipped_document("vrc_task_2")
+    mud = next(patch for patch in document["terrain"] if patch["kind"] == "mud")
+    mud.update({"min": [-2.0, -2.0], "max": [2.0, 2.0], "depth": 0.3})
+    heights = []
+    for world in (document, None):
+        api = LocalClient(make_sim("vrc_task_2", "1", world_document=world))
+        api.behaviour("stand", balance="joints")
+        state = api.step(1000)
+        assert state["score"]["falls"] == 0
+        heights.append(state["pelvis"]["position"][2])
+    assert heights[0] == pytest.approx(heights[1], abs=0.01)
 
 
 def _slide(sim, x: float) -> float:
