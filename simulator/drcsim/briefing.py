@@ -58,6 +58,16 @@ def rough_briefing(course: dict[str, Any], spec: WorldSpec) -> dict[str, Any]:
         for key in ("pose", "inlet", "valve"):
             pipe[key] = _shift(pipe[key], dx, dy)
         pipe["accuracy_m"] = SMALL[0]
+    # The VRC's task descriptions laid out the course's sections: where each patch of
+    # terrain lies (its area, to the decimetre) and what it is, not what it holds.
+    rough["terrain"] = {
+        name: {
+            "kind": patch["kind"],
+            "min": [round(v, 1) for v in patch["min"]],
+            "max": [round(v, 1) for v in patch["max"]],
+        }
+        for name, patch in sorted(spec.terrain.items())
+    }
     rough["task"] = {
         "title": spec.title,
         "checkpoints": [c["name"] for c in spec.checkpoints],

@@ -41,6 +41,17 @@ def test_the_briefing_gives_rough_positions_and_the_task(make_sim) -> None:
         assert max(errors) > 0.01  # not the exact poses
 
 
+def test_the_briefing_lays_out_the_terrain_sections(make_sim) -> None:
+    briefing = LocalClient(make_sim("vrc_task_2", "4")).hello()["course"]
+    assert briefing["terrain"]["rubble"] == {
+        "kind": "rubble",
+        "min": [11.0, -2.0],
+        "max": [15.0, 2.0],
+    }
+    assert {p["kind"] for p in briefing["terrain"].values()} == {"mud", "rubble", "hill"}
+    assert all(set(p) == {"kind", "min", "max"} for p in briefing["terrain"].values())
+
+
 def test_the_stereo_pair_is_on_by_default(make_sim) -> None:
     assert SensorSettings().camera_stereo is True
     settings = SensorSettings(camera_width=32, camera_height=24)
