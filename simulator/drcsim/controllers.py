@@ -19,8 +19,11 @@ class NaiveController(ExampleController):
     search = [(0.0, 0.0)]
     grasp_search = [(0.0, 0.0)]
     approach_door = False
-    walk_tries = 1
-    gait = {"step_time": 0.5, "double_support": 0.3, "step_length": 0.35}
+    straight = True
+    walk_tries = 1  # no recovery: down is out
+    approach_tries = 0
+    # Faster than the walker's defaults (0.25 m, 0.6 s, 0.3 s): long, quick steps.
+    gait = {"step_time": 0.4, "double_support": 0.1, "step_length": 0.4}
 
 
 class CarefulController(ExampleController):
@@ -30,9 +33,10 @@ class CarefulController(ExampleController):
     steer_gain = 8.0
     walk_past = 1.2
     walk_tries = 3
-    # The walker's own gait: a slower one (0.9 s on one foot, 0.2 m steps) fell sooner in
-    # mud, where the stance foot tips further the longer it bears the robot alone.
-    gait: dict[str, float] = {}
+    approach_tries = 3
+    avoid = ("rubble",)
+    # Slower and shorter than the walker's defaults (0.25 m, 0.6 s, 0.3 s).
+    gait = {"step_length": 0.2, "step_time": 0.8, "double_support": 0.5}
     search = SEARCH + [
         (dx, dy) for dx in (-0.09, -0.03, 0.03, 0.09) for dy in (-0.09, -0.03, 0.03, 0.09)
     ]

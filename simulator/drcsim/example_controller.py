@@ -35,6 +35,28 @@ def grid(spacing: float, radius: float) -> list[tuple[float, float]]:
 # (the README's grasp); wherever the coupler lies within the briefing's 8 cm and however it
 # is turned, a grid 5 cm apart has a point within 3.6 cm (5/sqrt 2) of its middle.
 GRASP_SEARCH = grid(0.05, 0.115)
+# A walk may take this long (simulated s) plus its distance at the slowest speed expected
+# (the walker in deep mud); past it the controller walks there again or moves on.
+WALK_BASE_S = 30.0
+WALK_SLOWEST = 0.05  # m/s
+# Moves shorter than the walker's 0.6 m are stepped without turning round (backwards or
+# sideways): a leg of a shuffle stays below that.
+SHUFFLE_LEG = 0.5
+# ...in short steps: a sideways leg in the walker's 0.25 m steps ends with the body still
+# swaying out over the last foot (it fell that way at the standpipe).
+SHUFFLE_GAIT = {"step_length": 0.15}
+# The seat assist puts the robot in the seat within 1.5 m of the driver door: stand this
+# far out from the door (the briefing's door is off by up to 0.25 m), clear of the body.
+DOOR_STANDOFF = 0.5
+# The hose hangs 0.75 m behind the coupler held 0.45 m ahead of the pelvis: back away until
+# it has slid off the table (half 0.6 m long) before turning, or it snags on the table.
+TABLE_CLEAR = 1.9
+# How far from a patch of terrain the careful controller's path round it keeps (m).
+HAZARD_GAP = 0.4
+
+
+class Down(ClientError):
+    """The robot fell and the controller does not get it up: it gives up the run."""
 
 
 def _yaw(orientation: list[float]) -> float:
@@ -54,7 +76,10 @@ class ExampleController:
     search = SEARCH
     grasp_search = GRASP_SEARCH
     approach_door = True
-    walk_tries = 2
+    walk_tries = 2  # walks after a fall before giving up (1: no recovery)
+    approach_tries = 2  # walks again when a walk ends short of its goal
+    straight = False  # True: straight at every goal, no approach or backing-away legs
+    avoid: tuple[str, ...] = ()  # kinds of terrain (the briefing's) walked round in task 2
     gait: dict[str, float] = {}  # the walker's defaults (used with balance "joints")
 
     def __init__(
@@ -71,6 +96,7 @@ class ExampleController:
         self.lockstep = bool(self.info["lockstep"])
         self.deadline = time.monotonic() + timeout_s
         self.final_score: dict[str, Any] | None = None
+        self.gave_up: str | None = None
         if not self.lockstep and isinstance(client, SimClient):
             client.subscribe("clock", "score")
 
@@ -112,26 +138,55 @@ class ExampleController:
         return state
 
     # -- building blocks --------------------------------------------------------------------
-    def walk(self, x: float, y: float, yaw: float, limit_s: float = 90.0) -> dict[str, Any]:
-        """Walk to a pose and wait until the walk ends; after a fall, get up and try again."""
-        for _ in range(self.walk_tries):
-            falls = self.client.state()["score"]["falls"]
-            self.client.behaviour("walk", pose=[x, y, yaw], **self.walk_params())
-            state = self.until(
-                lambda s: not str(s["behaviour"]["walk"]).startswith("walking"), limit_s
-            )
-            if state["score"]["ended"] or state["score"]["falls"] == falls:
-                return state
-            self.log(f"fell walking to {x:.2f} {y:.2f}: getting up")
-            self.client.behaviour("stand", balance=self.balance)  # the recovery assist
-            self.advance(1.0)
-        return state
+    def walk(
+        self, x: float, y: float, yaw: float, limit_s: float | None = None, **gait: float
+    ) -> dict[str, Any]:
+        """Walk to a pose; after a fall get up (or give up), after a short stop walk again."""
+        recoveries, approaches = self.walk_tries - 1, self.approach_tries
+        while True:
+            state = self.client.state()
+            falls = state["score"]["falls"]
+            here = state["pelvis"]["position"]
+            limit = limit_s or WALK_BASE_S + math.hypot(x - here[0], y - here[1]) / WALK_SLOWEST
+            self.client.behaviour("walk", pose=[x, y, yaw], **self.walk_params(**gait))
 
-    def walk_params(self) -> dict[str, Any]:
-        """Return the walk behaviour's balance and gait parameters for this controller."""
+            def over(s: dict[str, Any], falls: int = falls) -> bool:  # fell, or stopped
+                walk = str(s["behaviour"]["walk"])
+                return s["score"]["falls"] > falls or not walk.startswith("walking")
+
+            state = self.until(over, limit)
+            if state["score"]["ended"]:
+                return state
+            if state["score"]["falls"] > falls:
+                if recoveries <= 0:
+                    raise Down(f"fell walking to {x:.2f} {y:.2f} and does not get up")
+                recoveries -= 1
+                self.log(f"fell walking to {x:.2f} {y:.2f}: getting up")
+                self.client.behaviour("stand", balance=self.balance)  # the recovery assist
+                self.advance(1.0)
+                continue
+            status = str(state["behaviour"]["walk"])
+            if status == "done" or approaches <= 0:
+                return state
+            approaches -= 1  # ended short (blocked, or still walking at the limit): again
+            self.log(f"walk to {x:.2f} {y:.2f} ended {status!r}: walking there again")
+
+    def walk_params(self, **gait: float) -> dict[str, Any]:
+        """Return the walk behaviour's balance and gait parameters (this controller's, `gait`)."""
         if self.balance == "harness":
             return {}
-        return {"balance": self.balance, **self.gait}
+        return {"balance": self.balance, **self.gait, **gait}
+
+    def shuffle(self, x: float, y: float, yaw: float) -> dict[str, Any]:
+        """Step to a pose nearby in short legs, backwards or sideways, without turning round."""
+        state = self.client.state()
+        px, py = state["pelvis"]["position"][:2]
+        legs = max(1, math.ceil(math.hypot(x - px, y - py) / SHUFFLE_LEG))
+        for leg in range(1, legs + 1):
+            state = self.walk(
+                px + (x - px) * leg / legs, py + (y - py) * leg / legs, yaw, **SHUFFLE_GAIT
+            )
+        return state
 
     def reach(
         self, hand: str, target: list[float], limit_s: float = 4.0, **params: Any
@@ -152,6 +207,9 @@ class ExampleController:
         }[self.info["world"]]
         try:
             task(self.info["course"])
+        except Down as exc:
+            self.gave_up = str(exc)
+            self.log(f"gave up: {exc}")
         except ClientError:
             if self.final_score is None:
                 raise  # a real failure, not the server going away after the run ended
@@ -161,24 +219,36 @@ class ExampleController:
         return self.final_score
 
     def walking(self, course: dict[str, Any]) -> None:
-        """Task 2: walk through each gate in turn."""
+        """Task 2: walk through each gate in turn, around the terrain it avoids (`avoid`)."""
+        hazards = [p for p in course.get("terrain", {}).values() if p["kind"] in self.avoid]
         for name in sorted(course["gates"]):
             gx, gy, gyaw = course["gates"][name]["pose"]
-            past = self.walk_past
-            state = self.walk(gx + past * math.cos(gyaw), gy + past * math.sin(gyaw), gyaw)
+            here = self.client.state()["pelvis"]["position"]
+            for patch in hazards:
+                if here[0] < patch["min"][0] and patch["max"][0] < gx:
+                    self.around(patch, gy)
+            x, y = gx + self.walk_past * math.cos(gyaw), gy + self.walk_past * math.sin(gyaw)
+            for patch in hazards:  # stop short of a patch beyond the gate, to go round it
+                if gx < patch["min"][0] < x + HAZARD_GAP:
+                    x, y = patch["min"][0] - HAZARD_GAP, gy
+            state = self.walk(x, y, gyaw)
             self.log(f"{name}: {state['score']}")
             if state["score"]["ended"]:
                 return
 
+    def around(self, patch: dict[str, Any], then_y: float) -> None:
+        """Walk round a patch of terrain (the course runs along +x), on its nearer side."""
+        (x0, y0), (x1, y1) = patch["min"], patch["max"]
+        y = self.client.state()["pelvis"]["position"][1]
+        side = y1 + HAZARD_GAP if abs(y - y1) <= abs(y - y0) else y0 - HAZARD_GAP
+        self.log(f"round the {patch['kind']} at y {side:.1f}")
+        self.walk(x0 - HAZARD_GAP, side, 0.0)
+        self.walk(x1 + HAZARD_GAP, side, 0.0)
+        self.walk(x1 + HAZARD_GAP, then_y, 0.0)
+
     def driving(self, course: dict[str, Any]) -> None:
         """Task 1: get in, drive through both gates, stop, get out, walk to the finish."""
-        door = course["vehicle"]["driver_door"]
-        car_yaw = course["vehicle"]["pose"][2]
-        if self.approach_door:  # come to the door from the side, not through the vehicle
-            c, s = math.cos(car_yaw), math.sin(car_yaw)
-            self.walk(door[0] - 2.5 * c, door[1] - 2.5 * s, car_yaw)
-        self.walk(door[0], door[1], car_yaw)
-        self.client.behaviour("enter_vehicle")
+        self.get_in(course["vehicle"])
         self.log(f"seated: {self.advance(0.5)['score']}")
         for name in ("gate_1", "gate_2"):
             gx, gy, gyaw = course["gates"][name]["pose"]
@@ -187,13 +257,39 @@ class ExampleController:
         self.client.behaviour("drive", direction="neutral", brake=1.0, hand_brake=True)
         self.advance(2.0)
         self.client.behaviour("exit_vehicle")
+        state = self.advance(2.0)  # let it settle on its feet beside the door
         gx, gy, gyaw = course["gates"]["gate_3"]["pose"]
-        # Out wide on the driver's side first: braking by foot, the vehicle may have come to
-        # rest close to the finish, and a straight walk there would brush along its side.
         c, s = math.cos(gyaw), math.sin(gyaw)
-        self.walk(gx - 2.0 * c - 1.5 * s, gy - 2.0 * s + 1.5 * c, gyaw)
+        if not self.straight:
+            # Out along the vehicle's side, past its front (braking by foot, it may have come
+            # to rest close to the finish), then square in front of the finish gate.
+            ex, ey = state["pelvis"]["position"][:2]
+            yaw = _yaw(state["pelvis"]["orientation"])
+            ahead = (gx - 1.0 * c - ex) * math.cos(yaw) + (gy - 1.0 * s - ey) * math.sin(yaw)
+            if ahead > 2.5:
+                self.walk(ex + 2.0 * math.cos(yaw), ey + 2.0 * math.sin(yaw), yaw)
+            self.walk(gx - 1.0 * c, gy - 1.0 * s, gyaw)
         past = self.walk_past
-        self.walk(gx + past * math.cos(gyaw), gy + past * math.sin(gyaw), gyaw)
+        self.walk(gx + past * c, gy + past * s, gyaw)
+
+    def get_in(self, vehicle: dict[str, Any]) -> None:
+        """Walk to the driver door (from behind, along the side) and take the seat assist."""
+        door, car_yaw = vehicle["driver_door"], vehicle["pose"][2]
+        c, s = math.cos(car_yaw), math.sin(car_yaw)
+        out = 0.0 if self.straight else DOOR_STANDOFF
+        stand = (door[0] - s * out, door[1] + c * out)
+        if self.approach_door:  # come to the door from the side, not through the vehicle
+            self.walk(stand[0] - 2.5 * c, stand[1] - 2.5 * s, car_yaw)
+        self.walk(*stand, car_yaw)
+        if self.straight:
+            self.client.behaviour("enter_vehicle")  # refused if it never got to the door
+            return
+        refused = self.client.try_behaviour("enter_vehicle").get("error")
+        if refused is None:
+            return
+        self.log(f"{refused}: walking to the door itself")
+        self.walk(door[0], door[1], car_yaw)
+        self.client.behaviour("enter_vehicle")
 
     def _drive_through(self, tx: float, ty: float, limit_s: float = 60.0) -> None:
         state = self.client.state()
@@ -230,10 +326,11 @@ class ExampleController:
                 break
             self.client.behaviour("release", hand="right")
         self.reach("right", [0.45, -0.3, 0.35], frame="pelvis")
-        self.log(f"lifted: {self.advance(0.5)['score']}")
-        # Back away from the table before heading for the standpipe.
-        side = -1.0 if inlet[1] < hose[1] else 1.0
-        self.walk(table_x - 1.2, hose[1] + side * 1.0, 0.0)
+        state = self.advance(0.5)
+        self.log(f"lifted: {state['score']}")
+        if not self.straight:  # straight back, drawing the hose off the table lengthwise
+            y = state["pelvis"]["position"][1]
+            self.shuffle(min(state["pelvis"]["position"][0], table_x - TABLE_CLEAR), y, 0.0)
         pipe_yaw = course["standpipe"]["pose"][2]
 
         def near(point: list[float], forward: float, left: float) -> tuple[float, float]:
@@ -251,7 +348,8 @@ class ExampleController:
                 break
         self.reach("right", [0.3, -0.3, 0.0], frame="pelvis")
         self.client.behaviour("arm_rest", hand="right")
-        self.walk(*near(valve, -0.5, -0.3), pipe_yaw)
+        # Sideways along the standpipe to the valve, without turning round.
+        (self.walk if self.straight else self.shuffle)(*near(valve, -0.5, -0.3), pipe_yaw)
         self.reach("left", [*near(valve, -0.12, 0.0), valve[2]])
         self.client.behaviour("turn_valve", hand="left", angle=3.5)
         self.until(lambda s: s["behaviour"]["valve"] != "turning", 30.0)

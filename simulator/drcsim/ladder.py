@@ -28,9 +28,9 @@ def run_one(
         wait_ready(port, process)
         with SimClient("127.0.0.1", port, timeout_s=30.0) as client:
             controller = CONTROLLERS[style](client, timeout_s=3600.0, balance=balance)
-            note = None
             try:
                 score = controller.run()
+                note = controller.gave_up  # down after a fall it does not get up from
             except ClientError as exc:  # the controller gave up (a refused command)
                 note, score = str(exc), {}
             if not score.get("ended"):

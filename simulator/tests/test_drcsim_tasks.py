@@ -7,8 +7,10 @@ import subprocess
 import sys
 
 import pytest
+from drcsim.controllers import CarefulController
 from drcsim.example_controller import ExampleController
 from drcsim.local import LocalClient
+from drcsim.worlds import shipped_document
 
 
 @pytest.mark.parametrize("world", ["vrc_task_1", "vrc_task_3"])
@@ -48,3 +50,25 @@ def test_example_controller_over_the_network(server) -> None:
     )
     score = json.loads(done.stdout.strip().splitlines()[-1])
     assert score["checkpoints"] == 4 and score["reason"] == "complete"
+
+
+def test_the_careful_controller_walks_round_the_rubble_and_through_the_gate(make_sim) -> None:
+    document = shipped_document("vrc_task_2")
+    document["configs"]["1"]["robot"] = {"start": [10.3, 0.0, 0.0]}  # past gate_2
+    sim = make_sim("vrc_task_2", "1", world_document=document)
+    path: list[tuple[float, float]] = []
+
+    class Watched(LocalClient):  # records where the robot really is, 4 times a second
+        def step(self, steps: int = 1) -> dict:
+            state = super().step(steps)
+            path.append(sim.client.getBasePositionAndOrientation(sim.scene.robot)[0][:2])
+            return state
+
+    controller = CarefulController(Watched(sim))
+    course = controller.info["course"]
+    course["gates"] = {"gate_3": course["gates"]["gate_3"]}
+    controller.walking(course)
+    (x0, y0), (x1, y1) = course["terrain"]["rubble"]["min"], course["terrain"]["rubble"]["max"]
+    assert not [p for p in path if x0 - 0.2 < p[0] < x1 + 0.2 and y0 - 0.2 < p[1] < y1 + 0.2]
+    assert max(abs(p[1]) for p in path) > y1 and path[-1][0] > 16.5  # round it, then through
+    assert abs(path[-1][1]) < 1.0 and sim.snapshot()["score"]["falls"] == 0
