@@ -201,6 +201,7 @@ class Swing:
     end: Foothold
     first: int
     last: int
+    floor: tuple[float, ...] = ()  # lowest the sole may pass, at 0, 0.1, .. 1 of the way
 
 
 def _hold(
@@ -236,6 +237,7 @@ def timeline(
     p: GaitParameters,
     start: tuple[float, float],
     ground: Callable[[float, float], float],
+    place: Callable[[Foothold], Foothold] | None = None,
 ) -> tuple[list[tuple[float, float]], list[Swing]]:
     """Return the 100 Hz ZMP reference and the swings that take the feet through `poses`."""
     ss, ds = round(p.step_time / PREVIEW_DT), round(p.double_support / PREVIEW_DT)
@@ -260,6 +262,8 @@ def timeline(
     for pose, moving in moves:
         stance = "right" if moving == "left" else "left"
         end = _hold(moving, pose, p.stance_width, ground)
+        if place is not None:
+            end = place(end)
         first = len(zmp)
         zmp.extend([zmp_point(feet[stance], stance)] * ss)
         swings.append(Swing(moving, feet[moving], end, first, len(zmp)))

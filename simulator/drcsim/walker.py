@@ -60,6 +60,12 @@ SWING_FROM_ACTUAL = 0.5  # share of the pelvis's tracking error the swing foot a
 PLAN_STEPS = 30  # steps planned at a time: then both feet down and a fresh plan
 TOUCH_FORCE = 150.0  # N on the descending swing foot that count as its touchdown...
 TOUCH_HEIGHT = 0.015  # m ...when it is this much above the ground it was planned on
+PLACE_SHIFTS = (0.0, 0.03, -0.03, 0.06, -0.06, 0.09, -0.09, 0.12, -0.12, 0.15, -0.15, 0.18, -0.18)
+PLACE_ALONG = (-0.11, -0.035, 0.04, 0.115, 0.19)
+PLACE_ACROSS = (-0.08, -0.04, 0.0, 0.04, 0.08)
+PLACE_FLAT = 0.01
+SWING_MARGIN = 0.03  # m the sole passes above what stands on its way
+TOUCH_NEAR = 0.04  # m from its target: nearer, a touch is a landing; further, a scrape
 SLOPE_SPAN = 0.1  # m either side of a foot over which the slope under it is taken
 HIPS = {  # each hip joint in the pelvis frame (the right one mirrored)
     side: np.array([HIP_OFFSET[0], sign * HIP_OFFSET[1], HIP_OFFSET[2]])
@@ -184,10 +190,56 @@ class Walker:
         poses = plan_poses(mid, goal, self.params.step_length)[:PLAN_STEPS]
         start = (float(self.com[0]), float(self.com[1]))
         self.zmp, self.swings = timeline(
-            self.feet, poses, self.params, start, self.scene.ground_height
+            self.feet, poses, self.params, start, self.scene.ground_height, self._place
         )
+        for swing in self.swings:
+            swing.floor = self._floor(swing)
         self.tick = 0
         self.status = "walking"
+
+    def _place(self, foot: Foothold) -> Foothold:
+        """Move a foothold along its heading until the sole lies flat (not across an edge)."""
+        c, s = math.cos(foot.yaw), math.sin(foot.yaw)
+        best: tuple[float, Foothold] | None = None
+        for shift in PLACE_SHIFTS:
+            x, y = foot.x + c * shift, foot.y + s * shift
+            heights = self._heights(x, y, c, s)
+            spread = max(heights) - min(heights)
+            z = self.scene.ground_height(x, y) + max(heights)
+            if spread <= PLACE_FLAT:
+                return Foothold(x, y, z, foot.yaw)
+            if best is None or spread < best[0]:
+                best = (spread, Foothold(x, y, z, foot.yaw))
+        return foot if best is None else best[1]
+
+    def _floor(self, swing: Swing) -> tuple[float, ...]:
+        """Return the lowest the sole may pass along its way: over what stands there."""
+        a, b = swing.start, swing.end
+        c, s = math.cos(b.yaw), math.sin(b.yaw)
+        floor = [-math.inf]
+        for k in range(1, 10):
+            x, y = a.x + (b.x - a.x) * k / 10, a.y + (b.y - a.y) * k / 10
+            block = max(self._heights(x, y, c, s))  # above the ground's own shape (a hill)
+            top = self.scene.ground_height(x, y) + block
+            low = min(a.z, b.z) + PLACE_FLAT
+            floor.append(top + SWING_MARGIN if block > PLACE_FLAT and top > low else -math.inf)
+        return (*floor, -math.inf)
+
+    def _heights(self, x: float, y: float, c: float, s: float) -> list[float]:
+        """Return what stands above the ground's shape over a sole and a margin round it."""
+        starts, ends = [], []
+        for along in PLACE_ALONG:
+            for across in PLACE_ACROSS:
+                px, py = x + c * along - s * across, y + s * along + c * across
+                starts.append((px, py, 0.5))
+                ends.append((px, py, -0.05))
+        heights = []
+        for (px, py, _), hit in zip(starts, self.client.rayTestBatch(starts, ends), strict=True):
+            if hit[0] >= 0 and hit[0] != self.scene.robot:
+                heights.append(max(0.0, float(hit[3][2]) - self.scene.ground_height(px, py)))
+            else:
+                heights.append(0.0)
+        return heights
 
     def _mid_yaw(self) -> float:
         a, b = self.feet["left"].yaw, self.feet["right"].yaw
@@ -240,7 +292,8 @@ class Walker:
         real = self._foot(swing.side)
         # Only a touch above the planned ground counts: on the plan's ground the step ends
         # as planned (taking where the foot touched there let errors pile up step by step).
-        if force > TOUCH_FORCE and real.z > swing.end.z + TOUCH_HEIGHT:
+        near = math.hypot(real.x - swing.end.x, real.y - swing.end.y) < TOUCH_NEAR
+        if force > TOUCH_FORCE and near and real.z > swing.end.z + TOUCH_HEIGHT:
             self.touched_swing = swing
             self.touched = Foothold(real.x, real.y, real.z, swing.end.yaw)
 
@@ -282,12 +335,11 @@ class Walker:
         dyaw = wrap_angle(b.yaw - a.yaw)
         # sin^2: the foot comes down at no speed (sin's 0.3 m/s touchdown jolted the robot).
         lift = self.params.step_height * math.sin(math.pi * tau) ** 2
-        return Foothold(
-            a.x + (b.x - a.x) * s,
-            a.y + (b.y - a.y) * s,
-            a.z + (b.z - a.z) * s + lift,
-            a.yaw + dyaw * s,
-        )
+        z = a.z + (b.z - a.z) * s + lift
+        if swing.floor:  # never lower than what the sole is passing over (a block's top)
+            k = min(9, int(s * 10))
+            z = max(z, swing.floor[k], swing.floor[k + 1])
+        return Foothold(a.x + (b.x - a.x) * s, a.y + (b.y - a.y) * s, z, a.yaw + dyaw * s)
 
     def _joints(self) -> None:
         # The pattern runs at 100 Hz; the joints follow its COM interpolated at 1 kHz.

@@ -125,3 +125,20 @@ def test_the_walker_climbs_the_steepest_hill_with_its_soles_on_the_slope(make_si
     state = _walk(LocalClient(sim), [17.6, 0.0, 0.0], 15)
     assert state["behaviour"]["walk"] == "done" and state["score"]["falls"] == 0
     assert _pelvis(sim)[2] > 0.2 + 0.85  # up on the hill's top
+
+
+def test_the_walker_steps_up_onto_a_box_and_down_off_it(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "1")
+    client = sim.client
+    box = client.createCollisionShape(client.GEOM_BOX, halfExtents=[0.3, 0.5, 0.025])
+    client.createMultiBody(0, box, -1, [0.8, 0.0, 0.025])  # 5 cm high, x 0.5..1.1 m
+    api = LocalClient(sim)
+    api.behaviour("walk", pose=[1.6, 0.0, 0.0], balance="joints")
+    walker, highest = sim.behaviours.walker, 0.0
+    for _ in range(24):
+        state = api.step(500)
+        highest = max(highest, *(walker.feet[side].z for side in ("left", "right")))
+        if not state["behaviour"]["walk"].startswith("walking"):
+            break
+    assert state["behaviour"]["walk"] == "done" and state["score"]["falls"] == 0
+    assert highest == pytest.approx(0.05, abs=0.01)  # it stood on the box on the way
