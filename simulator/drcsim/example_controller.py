@@ -51,6 +51,7 @@ DOOR_STANDOFF = 0.5
 # The hose hangs 0.75 m behind the coupler held 0.45 m ahead of the pelvis: back away until
 # it has slid off the table (half 0.6 m long) before turning, or it snags on the table.
 TABLE_CLEAR = 1.9
+TABLE_STANDOFF = 0.9  # m from the table's middle to the pelvis facing it (0.3 from its edge)
 # How far from a patch of terrain the careful controller's path round it keeps (m).
 HAZARD_GAP = 0.4
 
@@ -315,7 +316,9 @@ class ExampleController:
         inlet = course["standpipe"]["inlet"]
         valve = course["standpipe"]["valve"]
         table_x = course["table"]["pose"][0]
-        self.walk(hose[0] - 0.45, hose[1] + 0.3, 0.0)
+        # Behind the coupler, but clear of the table's edge: an arm or knee on it tips the
+        # robot over backwards as it stops.
+        self.walk(min(hose[0] - 0.45, table_x - TABLE_STANDOFF), hose[1] + 0.3, 0.0)
         # The briefing is rough: feel for the coupler around where it should be.
         for dx, dy in self.grasp_search:
             self.reach("right", [hose[0] - 0.25 + dx, hose[1] + dy, hose[2] + 0.3])
