@@ -1,4 +1,4 @@
-"""Physics assists, the same for every team: balance harness, grasp, seat, coupling."""
+"""Physics assists, the same for every team: grasp, seat, coupling."""
 
 from __future__ import annotations
 
@@ -6,14 +6,13 @@ import math
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from drcsim._bullet import BulletClient, pybullet
+from drcsim._bullet import pybullet
 from drcsim.control import JointController
 from drcsim.driving import VehicleDrive
 from drcsim.errors import CommandError
 from drcsim.models import humanoid, props, vehicle
 from drcsim.scene import Scene, yaw_quaternion
 
-HARNESS_FORCE = 6000.0  # N (and N m): enough to carry the robot, not to throw vehicles about
 GRASP_FORCE = 800.0
 HANDLE_REACH = 0.05  # palm to a rim, a lever's end or the coupler's axis, metres
 # The middle of the coupler's 0.16 m sleeve a palm may be at: within HANDLE_REACH of it, the
@@ -27,41 +26,6 @@ SEAT_FORCE = 50000.0
 # The links that pass through what a hand closes on (the fingers do not wrap around it).
 HAND_PARTS = ("hand", "finger", "larm", "ufarm")
 GRIPPER_CLOSED = 0.04
-
-
-class Harness:
-    """Balance assist: a force-limited constraint that holds the pelvis upright at a pose."""
-
-    def __init__(self, client: BulletClient, robot: int) -> None:
-        self.client = client
-        pos, orn = client.getBasePositionAndOrientation(robot)
-        # The pose goes in the child (world) frame: as parentFrameOrientation it was
-        # composed with every later hold() and turned any start yaw back to 0.
-        self.constraint = client.createConstraint(
-            robot,
-            -1,
-            -1,
-            -1,
-            pybullet.JOINT_FIXED,
-            [0, 0, 0],
-            [0, 0, 0],
-            pos,
-            childFrameOrientation=orn,
-        )
-        self.active = False
-        self.release()
-
-    def hold(self, x: float, y: float, z: float, yaw: float) -> None:
-        """Hold the pelvis at (x, y, z), upright, facing `yaw`."""
-        self.client.changeConstraint(
-            self.constraint, [x, y, z], yaw_quaternion(yaw), maxForce=HARNESS_FORCE
-        )
-        self.active = True
-
-    def release(self) -> None:
-        """Let go of the pelvis: only the joints hold the robot up."""
-        self.client.changeConstraint(self.constraint, maxForce=0.0)
-        self.active = False
 
 
 def _point_distance(

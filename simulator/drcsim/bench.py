@@ -13,7 +13,6 @@ from typing import Any
 import numpy as np
 
 from drcsim.client import SimClient
-from drcsim.commands import BALANCE
 from drcsim.engine import RunOptions, Simulation
 from drcsim.errors import ClientError, DrcsimError
 from drcsim.protocol import check_command, encode
@@ -64,12 +63,11 @@ def measure_rtf(
     config: str,
     seconds: float,
     sensors: bool,
-    balance: str | None = None,
     split: bool = False,
 ) -> dict[str, Any]:
-    """Step `world` for `seconds` of simulated time (robot walking); return RTF and falls.
+    """Step `world` for `seconds` of simulated time (the walker walking); return RTF and falls.
 
-    `balance` None walks with the default balance. `rtf` is by wall clock, `cpu_rtf` by the
+    `rtf` is by wall clock, `cpu_rtf` by the
     process's CPU time over the same steps; `split` adds where that CPU time went (the timing
     itself costs about 1% more).
     """
@@ -84,9 +82,7 @@ def measure_rtf(
         if sensors:
             sim.active_topics = set(BENCH_TOPICS)
         x, y, yaw = sim.spec.robot_start
-        walk: dict[str, Any] = {"op": "behaviour", "name": "walk", "pose": [x + 1.0, y, yaw]}
-        if balance is not None:
-            walk["balance"] = balance
+        walk = {"op": "behaviour", "name": "walk", "pose": [x + 1.0, y, yaw]}
         sim.apply_command(check_command(walk))
         cost = CostSplit(sim) if split else None
         steps = round(seconds / TIMESTEP)
@@ -97,7 +93,6 @@ def measure_rtf(
         row = {
             "world": world,
             "sensors": sensors,
-            "balance": sim.behaviours.balance,
             "sim_s": sim.sim_time,
             "wall_s": round(wall, 3),
             "cpu_s": round(cpu, 3),
@@ -222,19 +217,18 @@ def measure_round_trip(samples: int) -> dict[str, Any]:
 def run_bench(seconds: float, samples: int, split: bool = False) -> dict[str, Any]:
     """Return every benchmark figure.
 
-    Each world walks with each balance mode twice: with no sensors (the reference, measured in
+    Each world walks twice: with no sensors (the reference, measured in
     the same run) and with every sensor subscribed. A sensor row's `cpu_vs_no_sensors` is its
     CPU time over the reference's, and `meets_target` compares its `cpu_rtf` with TARGET_RTF.
     """
     load_before = os.getloadavg()
     rtf: list[dict[str, Any]] = []
     for world in WORLD_NAMES:
-        for balance in BALANCE:
-            reference = measure_rtf(world, "1", seconds, False, balance, split)
-            loaded = measure_rtf(world, "1", seconds, True, balance, split)
-            loaded["cpu_vs_no_sensors"] = round(loaded["cpu_s"] / max(reference["cpu_s"], 1e-9), 2)
-            loaded["meets_target"] = loaded[TARGET_ON] >= TARGET_RTF
-            rtf += [reference, loaded]
+        reference = measure_rtf(world, "1", seconds, False, split)
+        loaded = measure_rtf(world, "1", seconds, True, split)
+        loaded["cpu_vs_no_sensors"] = round(loaded["cpu_s"] / max(reference["cpu_s"], 1e-9), 2)
+        loaded["meets_target"] = loaded[TARGET_ON] >= TARGET_RTF
+        rtf += [reference, loaded]
     load_after = os.getloadavg()
     return {
         "rtf": rtf,

@@ -123,7 +123,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
                     f" {'meets' if row['meets_target'] else 'MISSES'} target"
                 )
             print(
-                f"{row['world']:<11} sensors={row['sensors']!s:<5} balance={row['balance']:<7} "
+                f"{row['world']:<11} sensors={row['sensors']!s:<5} "
                 f"cpu_rtf={row['cpu_rtf']:<6} wall_rtf={row['rtf']:<6}{verdict}"
             )
             if "cpu_ms_per_sim_s" in row:

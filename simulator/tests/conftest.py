@@ -9,6 +9,9 @@ from pathlib import Path
 import pytest
 from drcsim.bench import start_server, wait_ready
 from drcsim.engine import RunOptions, Simulation
+from drcsim.models import humanoid
+from drcsim.protocol import check_command
+from drcsim.scene import yaw_quaternion
 
 ServerFactory = Callable[..., tuple[subprocess.Popen[bytes], int]]
 
@@ -26,6 +29,26 @@ def make_sim() -> Iterator[Callable[..., Simulation]]:
     yield factory
     for sim in made:
         sim.close()
+
+
+def _place(sim: Simulation, x: float, y: float, yaw: float) -> None:
+    """Stand the robot at (x, y) facing `yaw`, balanced by the walker, as if it had walked there."""
+    client, robot = sim.client, sim.scene.robot
+    z = humanoid.STAND_PELVIS_HEIGHT + sim.scene.ground_height(x, y)
+    client.resetBasePositionAndOrientation(robot, [x, y, z], yaw_quaternion(yaw))
+    client.resetBaseVelocity(robot, [0, 0, 0], [0, 0, 0])
+    sim.controller.reset_to(humanoid.STAND_POSTURE)
+    assert sim.apply_command(check_command({"op": "behaviour", "name": "stand"}))["ok"]
+    sim.step(500)  # settled on its feet
+
+
+@pytest.fixture
+def place() -> Callable[[Simulation, float, float, float], None]:
+    """Return a function that stands the robot at a pose, for tests of what it does there.
+
+    The walker walks about 0.24 m/s: tests whose subject is not the walk start where it ends.
+    """
+    return _place
 
 
 @pytest.fixture

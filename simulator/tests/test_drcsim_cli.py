@@ -29,12 +29,9 @@ def test_bench_reports_every_world_and_the_round_trip() -> None:
     done = _drcsim("bench", "--json", "--seconds", "0.1", "--samples", "20", "--split")
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
-    assert {(r["world"], r["sensors"]) for r in result["rtf"]} == {
+    assert [(r["world"], r["sensors"]) for r in result["rtf"]] == [
         (w, s) for w in ("vrc_task_1", "vrc_task_2", "vrc_task_3") for s in (False, True)
-    }
-    assert ("vrc_task_2", True, "joints") in {
-        (r["world"], r["sensors"], r["balance"]) for r in result["rtf"]
-    }
+    ]  # one row each: the walker is the only balance
     assert all(r["cpu_rtf"] > 0 and r["rtf"] > 0 for r in result["rtf"])
     loaded = [r for r in result["rtf"] if r["sensors"]]
     assert all(r["cpu_vs_no_sensors"] > 0 for r in loaded)  # against the same run's reference

@@ -44,7 +44,7 @@ def test_run_ends_at_the_time_limit() -> None:
 
 
 def _collapse(sim) -> dict:
-    """Switch the balance assist off and every joint limp until the robot is down."""
+    """Take the legs from the walker and make every joint limp until the robot is down."""
     names = sim.controller.names
     sim.apply_command(check_command({"op": "behaviour", "name": "none"}))
     sim.apply_command(check_command({"op": "joints", "torque": dict.fromkeys(names, 0.0)}))

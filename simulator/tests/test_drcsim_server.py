@@ -92,6 +92,7 @@ def test_sensors_are_published_only_to_subscribers(server: ServerFactory) -> Non
         "camera_stereo=true",
     )
     with SimClient("127.0.0.1", port) as client:
+        client.step(500)  # the robot settles on its feet (the walker lowers the pelvis)
         client.subscribe("imu", "camera", "lidar", "score")
         deadline = time.monotonic() + 20
         seen: dict[str, dict] = {}

@@ -61,7 +61,7 @@ def test_feet_sink_through_the_mud_and_stand_on_its_firm_bottom(make_sim) -> Non
     client, robot, pit = sim.client, sim.scene.robot, sim.scene.mud[0]
     pos, orn = client.getBasePositionAndOrientation(robot)
     client.resetBasePositionAndOrientation(robot, [7.0, 0.0, pos[2] + 0.05], orn)
-    LocalClient(sim).behaviour("stand", balance="joints")
+    LocalClient(sim).behaviour("stand")
     sim.step(800)
     for side in ("l_foot", "r_foot"):
         lower, upper = client.getAABB(robot, sim.scene.robot_links[side])
@@ -82,7 +82,7 @@ def test_a_robot_in_deep_mud_stands_on_its_bottom_as_documented(make_sim) -> Non
     heights = []
     for world in (document, None):
         api = LocalClient(make_sim("vrc_task_2", "1", world_document=world))
-        api.behaviour("stand", balance="joints")
+        api.behaviour("stand")
         state = api.step(1000)
         assert state["score"]["falls"] == 0
         heights.append(state["pelvis"]["position"][2])

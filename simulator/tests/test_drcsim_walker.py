@@ -1,4 +1,4 @@
-"""The joint-level balance and walking behaviour: no harness, only the leg joints hold the robot."""
+"""The balance and walking behaviour: nothing but the leg joints holds the robot up."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ def _pelvis(sim) -> tuple[float, ...]:
 
 def _walk(client: LocalClient, pose: list[float], seconds: float) -> dict:
     """Walk to `pose` through the joints; return the state once the walk is no longer on."""
-    client.behaviour("walk", pose=pose, balance="joints")
+    client.behaviour("walk", pose=pose)
     for _ in range(round(seconds * 2)):
         state = client.step(500)
         if not state["behaviour"]["walk"].startswith("walking"):
@@ -43,26 +43,47 @@ def test_leg_ik_puts_the_foot_where_asked(make_sim) -> None:
     assert client.getEulerFromQuaternion(state[5]) == pytest.approx((0.0, 0.0, 0.5), abs=1e-4)
 
 
+def _robot_constraints(sim) -> list[int]:
+    """Return every constraint that has the robot at either end."""
+    client, robot = sim.client, sim.scene.robot
+    ids = [client.getConstraintUniqueId(i) for i in range(client.getNumConstraints())]
+    return [i for i in ids if robot in client.getConstraintInfo(i)[0:3:2]]
+
+
+def test_the_robot_starts_standing_on_its_joints_and_falls_without_them(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "1")
+    client = LocalClient(sim)
+    state = client.step(2000)  # no command yet: the run's initial stand
+    assert state["score"]["falls"] == 0 and _pelvis(sim)[2] > 0.85
+    assert _robot_constraints(sim) == [] and state["behaviour"]["mode"] == "stand"
+    client.behaviour("none")  # the legs are the team's: nobody balances the robot but them
+    client.request({"op": "joints", "torque": dict.fromkeys(sim.controller.names, 0.0)})
+    for _ in range(10):
+        state = client.step(500)
+        if state["score"]["falls"]:
+            break
+    assert state["score"]["falls"] == 1 and _robot_constraints(sim) == []
+
+
 def test_standing_and_walking_through_the_joints_alone(make_sim) -> None:
     sim = make_sim("vrc_task_2", "1")
     client = LocalClient(sim)
-    client.behaviour("stand", balance="joints")
+    client.behaviour("stand")
     state = client.step(3000)
-    assert not sim.behaviours.harness.active and state["behaviour"]["balance"] == "joints"
     assert state["score"]["falls"] == 0 and _pelvis(sim)[2] > 0.85
     refused = client.request({"op": "joints", "position": {"l_leg_kny": 1.0}})
     assert refused["ok"] is False and "owned by stand" in refused["error"]
     state = _walk(client, [1.5, 0.0, 0.0], 30)
     assert state["behaviour"]["walk"] == "done" and state["score"]["falls"] == 0
     x, y, _ = _pelvis(sim)
-    assert math.hypot(x - 1.5, y) <= 0.05 and not sim.behaviours.harness.active
+    assert math.hypot(x - 1.5, y) <= 0.05 and _robot_constraints(sim) == []
 
 
 def test_walking_too_fast_falls(make_sim) -> None:
     sim = make_sim("vrc_task_2", "1")
     client = LocalClient(sim)
     fast = {"step_time": 0.3, "double_support": 0.05, "step_length": 0.45}
-    client.behaviour("walk", pose=[3.0, 0.0, 0.0], balance="joints", **fast)
+    client.behaviour("walk", pose=[3.0, 0.0, 0.0], **fast)
     for _ in range(20):
         state = client.step(500)
         if state["score"]["falls"]:
@@ -80,9 +101,7 @@ def test_joint_walking_is_deterministic(make_sim) -> None:
     for _ in range(2):
         sim = make_sim("vrc_task_2", "3")
         sim.apply_command(
-            check_command(
-                {"op": "behaviour", "name": "walk", "pose": [0.6, 1.2, 0.3], "balance": "joints"}
-            )
+            check_command({"op": "behaviour", "name": "walk", "pose": [0.6, 1.2, 0.3]})
         )
         sim.step(2500)
         runs.append(sim.state_vector())
@@ -95,7 +114,7 @@ def test_the_walker_walks_on_in_deep_mud_that_drags_at_its_legs(make_sim) -> Non
     pos, orn = client.getBasePositionAndOrientation(robot)
     client.resetBasePositionAndOrientation(robot, [6.5, 0.0, pos[2] + 0.002], orn)
     api = LocalClient(sim)
-    api.behaviour("walk", pose=[7.2, 0.0, 0.0], balance="joints")
+    api.behaviour("walk", pose=[7.2, 0.0, 0.0])
     feet = {sim.scene.robot_links["l_foot"], sim.scene.robot_links["r_foot"]}
     dragged = set()
     for _ in range(10):  # 5 s: four steps in config 5's mud (20 cm deep, 400 N s/m)
@@ -133,7 +152,7 @@ def test_the_walker_steps_up_onto_a_box_and_down_off_it(make_sim) -> None:
     box = client.createCollisionShape(client.GEOM_BOX, halfExtents=[0.3, 0.5, 0.025])
     client.createMultiBody(0, box, -1, [0.8, 0.0, 0.025])  # 5 cm high, x 0.5..1.1 m
     api = LocalClient(sim)
-    api.behaviour("walk", pose=[1.6, 0.0, 0.0], balance="joints")
+    api.behaviour("walk", pose=[1.6, 0.0, 0.0])
     walker, highest = sim.behaviours.walker, 0.0
     for _ in range(24):
         state = api.step(500)

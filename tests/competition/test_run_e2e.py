@@ -46,7 +46,7 @@ from tests.web.test_browser import log_in_page, webgl_chromium
 
 pytestmark = [pytest.mark.hosts, pytest.mark.browser]
 ZONE = "Europe/Berlin"
-RUN_SECONDS = 25  # simulated: the example controller passes a gate or two, not all four (~34 s)
+RUN_SECONDS = 25  # simulated: the example controller, on the walker, passes gate_1 (at ~16 s)
 
 
 @pytest.fixture
