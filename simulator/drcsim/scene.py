@@ -31,7 +31,6 @@ class TerrainPatch:
     kind: str
     lower: tuple[float, float]
     upper: tuple[float, float]
-    walk_speed: float
     height: float
     ramp: float = 0.0  # hills: length of the slope at each end (the top is `height` high)
 
@@ -237,7 +236,6 @@ def _build_terrain(client: BulletClient, spec: WorldSpec, scene: Scene) -> None:
                 patch["kind"],
                 (lower[0], lower[1]),
                 (upper[0], upper[1]),
-                float(patch["walk_speed"]),
                 height,
                 ramp,
             )

@@ -105,3 +105,25 @@ def test_0013_gives_stored_worlds_with_the_old_soft_mud_the_shipped_mud(
         others = db.session.scalars(select(World).where(World.name != "vrc_task_2")).all()
         assert {w.version for w in others} == {1}  # no mud: untouched
         db.engine.dispose()
+
+
+def test_0014_takes_walk_speed_out_of_stored_worlds(make_config: Callable[..., Config]) -> None:
+    shipped = shipped_document("vrc_task_2")
+    old = copy.deepcopy(shipped)
+    old["terrain"][0]["walk_speed"] = 0.45
+    old["configs"]["3"]["terrain"]["rubble"]["walk_speed"] = 0.55
+    app = create_app(make_config())
+    migrate.upgrade(app, "0013")
+    with app.app_context():
+        world = db.session.scalars(select(World).where(World.name == "vrc_task_2")).one()
+        world.document, world.digest = old, document_digest(old)
+        db.session.commit()
+        db.session.remove()
+    migrate.upgrade(app)
+    with app.app_context():
+        world = db.session.scalars(select(World).where(World.name == "vrc_task_2")).one()
+        assert world.document == shipped and world.version == 2
+        assert world.digest == document_digest(shipped)
+        others = db.session.scalars(select(World).where(World.name != "vrc_task_2")).all()
+        assert {w.version for w in others} == {1}  # no walk_speed: untouched
+        db.engine.dispose()

@@ -15,7 +15,7 @@ from typing import Any
 from drcsim.errors import WorldError
 
 MODELS = ("gate", "vehicle", "table", "hose", "standpipe")
-# terrain kind -> the fields scene.py reads (besides id, kind, min, max, walk_speed)
+# terrain kind -> the fields scene.py reads (besides id, kind, min, max)
 TERRAIN_FIELDS = {
     "mud": ("friction", "depth", "damping"),
     "rubble": ("blocks", "max_height", "friction"),
@@ -104,7 +104,6 @@ def check_terrain(patch: dict[str, Any], where: str) -> None:
     _vector(patch.get("max"), f"{where}.max", 2)
     if any(lo >= hi for lo, hi in zip(patch["min"], patch["max"], strict=True)):
         raise _fail(where, "min must be below max on both axes")
-    _number(patch.get("walk_speed"), f"{where}.walk_speed", 0.01)
     for name in TERRAIN_FIELDS[kind]:
         _number(patch.get(name), f"{where}.{name}", 0.0)
     if kind == "rubble" and not (isinstance(patch["blocks"], int) and patch["blocks"] <= 500):
