@@ -92,11 +92,11 @@ def test_a_walk_is_done_only_when_the_pelvis_is_at_the_goal(make_sim) -> None:
     assert math.hypot(pos[0] - 1.5, pos[1] - 0.4) <= 0.02 and abs(_yaw(sim) - 0.5) <= 0.04
 
 
-def test_walking_into_the_vehicle_stops_the_walk_instead_of_shoving_it(make_sim) -> None:
+def test_walking_into_the_vehicle_does_not_shove_it(make_sim) -> None:
     sim = make_sim("vrc_task_1", "1")
     car = sim.scene.vehicle
     before = sim.client.getBasePositionAndOrientation(car)[0]
-    status = _walk(sim, [2.5, 1.9, 0.0])
+    status = _walk(sim, [2.5, 1.9, 0.0], limit_steps=15_000)
     after = sim.client.getBasePositionAndOrientation(car)[0]
     assert status != "done"  # the walker leans on the car, it does not shove it
     assert math.dist(before[:2], after[:2]) < 0.3  # the harness shoved it 1.87 m
