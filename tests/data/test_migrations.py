@@ -79,51 +79,44 @@ def test_0012_ends_a_second_live_run_of_a_task_with_the_reason(
         db.engine.dispose()
 
 
+def _stored_world_becomes_shipped(
+    make_config: Callable[..., Config], revision: str, old: dict, what: str
+) -> None:
+    """Store `old` as vrc_task_2 at `revision`, upgrade: it is the shipped world, version 2."""
+    shipped = shipped_document("vrc_task_2")
+    assert old != shipped
+    app = create_app(make_config())
+    migrate.upgrade(app, revision)
+    with app.app_context():
+        world = db.session.scalars(select(World).where(World.name == "vrc_task_2")).one()
+        world.document, world.digest = old, document_digest(old)
+        db.session.commit()
+        db.session.remove()
+    migrate.upgrade(app)
+    with app.app_context():
+        world = db.session.scalars(select(World).where(World.name == "vrc_task_2")).one()
+        assert world.document == shipped and world.version == 2
+        assert world.digest == document_digest(shipped)
+        others = db.session.scalars(select(World).where(World.name != "vrc_task_2")).all()
+        assert {w.version for w in others} == {1}, f"no {what}: untouched"
+        db.engine.dispose()
+
+
 def test_0013_gives_stored_worlds_with_the_old_soft_mud_the_shipped_mud(
     make_config: Callable[..., Config],
 ) -> None:
-    shipped = shipped_document("vrc_task_2")
-    old = copy.deepcopy(shipped)
+    old = copy.deepcopy(shipped_document("vrc_task_2"))
     configs = old["configs"].values()
     for patch in [old["terrain"][0], *(c.get("terrain", {}).get("mud", {}) for c in configs)]:
         patch.pop("depth", None)
         if "friction" in patch:
             patch.update(friction=0.3, stiffness=20000.0)
-    assert old["terrain"][0]["kind"] == "mud" and old != shipped
-    app = create_app(make_config())
-    migrate.upgrade(app, "0012")
-    with app.app_context():
-        world = db.session.scalars(select(World).where(World.name == "vrc_task_2")).one()
-        world.document, world.digest = old, document_digest(old)
-        db.session.commit()
-        db.session.remove()
-    migrate.upgrade(app)
-    with app.app_context():
-        world = db.session.scalars(select(World).where(World.name == "vrc_task_2")).one()
-        assert world.document == shipped and world.version == 2
-        assert world.digest == document_digest(shipped)
-        others = db.session.scalars(select(World).where(World.name != "vrc_task_2")).all()
-        assert {w.version for w in others} == {1}  # no mud: untouched
-        db.engine.dispose()
+    assert old["terrain"][0]["kind"] == "mud"
+    _stored_world_becomes_shipped(make_config, "0012", old, "mud")
 
 
 def test_0014_takes_walk_speed_out_of_stored_worlds(make_config: Callable[..., Config]) -> None:
-    shipped = shipped_document("vrc_task_2")
-    old = copy.deepcopy(shipped)
+    old = copy.deepcopy(shipped_document("vrc_task_2"))
     old["terrain"][0]["walk_speed"] = 0.45
     old["configs"]["3"]["terrain"]["rubble"]["walk_speed"] = 0.55
-    app = create_app(make_config())
-    migrate.upgrade(app, "0013")
-    with app.app_context():
-        world = db.session.scalars(select(World).where(World.name == "vrc_task_2")).one()
-        world.document, world.digest = old, document_digest(old)
-        db.session.commit()
-        db.session.remove()
-    migrate.upgrade(app)
-    with app.app_context():
-        world = db.session.scalars(select(World).where(World.name == "vrc_task_2")).one()
-        assert world.document == shipped and world.version == 2
-        assert world.digest == document_digest(shipped)
-        others = db.session.scalars(select(World).where(World.name != "vrc_task_2")).all()
-        assert {w.version for w in others} == {1}  # no walk_speed: untouched
-        db.engine.dispose()
+    _stored_world_becomes_shipped(make_config, "0013", old, "walk_speed")
