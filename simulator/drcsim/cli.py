@@ -10,7 +10,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from drcsim.commands import BALANCE
 from drcsim.controllers import CONTROLLERS
 from drcsim.errors import DrcsimError
 from drcsim.worlds import CONFIG_NAMES, WORLD_NAMES, load_world, read_world_file
@@ -136,9 +135,7 @@ def cmd_ladder(args: argparse.Namespace) -> int:
     """Run the reference controllers over the worlds and configurations; print the table."""
     from drcsim.ladder import run_ladder
 
-    result = run_ladder(
-        args.controller, args.world, args.config, args.time_limit, args.jobs, args.balance
-    )
+    result = run_ladder(args.controller, args.world, args.config, args.time_limit, args.jobs)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -161,7 +158,6 @@ def cmd_example(args: argparse.Namespace) -> int:
             client,
             log=lambda line: print(line, file=sys.stderr),
             timeout_s=args.timeout,
-            balance=args.balance,
         )
         if args.world and controller.info["world"] != args.world:
             raise DrcsimError(f"the server runs {controller.info['world']}, not {args.world}")
@@ -253,7 +249,6 @@ def build_parser() -> argparse.ArgumentParser:
     example.add_argument("--world", choices=WORLD_NAMES)
     example.add_argument("--timeout", type=float, default=900.0, help="wall seconds")
     example.add_argument("--style", default="example", choices=list(CONTROLLERS))
-    example.add_argument("--balance", default="harness", choices=BALANCE)
     example.set_defaults(func=cmd_example)
     ladder = sub.add_parser("ladder", help="reference controllers x worlds x configurations")
     ladder.add_argument("--controller", action="append", choices=list(CONTROLLERS))
@@ -261,7 +256,6 @@ def build_parser() -> argparse.ArgumentParser:
     ladder.add_argument("--config", action="append", choices=CONFIG_NAMES)
     ladder.add_argument("--time-limit", type=float, default=600.0, help="simulated s per run")
     ladder.add_argument("--jobs", type=int, default=None, help="parallel runs (default: cores)")
-    ladder.add_argument("--balance", default="harness", choices=BALANCE)
     ladder.add_argument("--json", action="store_true")
     ladder.set_defaults(func=cmd_ladder)
     follow = sub.add_parser(

@@ -7,8 +7,6 @@ from typing import Any
 
 from drcsim.errors import ClientError
 
-BALANCE = ("harness", "joints")  # what holds the robot up in stand and walk (see the README)
-
 
 class CommandAPI(ABC):
     """hello, state, step, joints, behaviour and stop, over whatever `request` sends them to."""

@@ -81,16 +81,14 @@ class ExampleController:
     approach_tries = 2  # walks again when a walk ends short of its goal
     straight = False  # True: straight at every goal, no approach or backing-away legs
     avoid: tuple[str, ...] = ()  # kinds of terrain (the briefing's) walked round in task 2
-    gait: dict[str, float] = {}  # the walker's defaults (used with balance "joints")
+    gait: dict[str, float] = {}  # the walker's defaults
 
     def __init__(
         self,
         client: CommandAPI,
         log: Log = lambda _: None,
         timeout_s: float = 600.0,
-        balance: str = "harness",
     ):
-        self.balance = balance
         self.client = client
         self.log = log
         self.info = client.hello()
@@ -163,7 +161,7 @@ class ExampleController:
                     raise Down(f"fell walking to {x:.2f} {y:.2f} and does not get up")
                 recoveries -= 1
                 self.log(f"fell walking to {x:.2f} {y:.2f}: getting up")
-                self.client.behaviour("stand", balance=self.balance)  # the recovery assist
+                self.client.behaviour("stand")  # the recovery assist
                 self.advance(1.0)
                 continue
             status = str(state["behaviour"]["walk"])
@@ -173,10 +171,8 @@ class ExampleController:
             self.log(f"walk to {x:.2f} {y:.2f} ended {status!r}: walking there again")
 
     def walk_params(self, **gait: float) -> dict[str, Any]:
-        """Return the walk behaviour's balance and gait parameters (this controller's, `gait`)."""
-        if self.balance == "harness":
-            return {}
-        return {"balance": self.balance, **self.gait, **gait}
+        """Return the walk behaviour's gait parameters (this controller's, `gait`)."""
+        return {**self.gait, **gait}
 
     def shuffle(self, x: float, y: float, yaw: float) -> dict[str, Any]:
         """Step to a pose nearby in short legs, backwards or sideways, without turning round."""

@@ -18,16 +18,14 @@ from drcsim.errors import ClientError
 from drcsim.worlds import CONFIG_NAMES, WORLD_NAMES
 
 
-def run_one(
-    style: str, world: str, config: str, time_limit_s: float, balance: str = "harness"
-) -> dict[str, Any]:
+def run_one(style: str, world: str, config: str, time_limit_s: float) -> dict[str, Any]:
     """Run controller `style` on one world and configuration; return its score row."""
     started = time.monotonic()
     process, port = start_server(world, config, ["--lockstep", "--time-limit", str(time_limit_s)])
     try:
         wait_ready(port, process)
         with SimClient("127.0.0.1", port, timeout_s=30.0) as client:
-            controller = CONTROLLERS[style](client, timeout_s=3600.0, balance=balance)
+            controller = CONTROLLERS[style](client, timeout_s=3600.0)
             try:
                 score = controller.run()
                 note = controller.gave_up  # down after a fall it does not get up from
@@ -61,7 +59,6 @@ def run_ladder(
     configs: list[str] | None = None,
     time_limit_s: float = 600.0,
     jobs: int | None = None,
-    balance: str = "harness",
 ) -> dict[str, Any]:
     """Run every (controller, world, config); return the rows and the totals per controller."""
     styles = styles or list(CONTROLLERS)
@@ -71,9 +68,7 @@ def run_ladder(
     jobs = jobs or max(1, os.cpu_count() or 1)
     started = time.monotonic()
     with ThreadPoolExecutor(max_workers=jobs) as pool:
-        rows = list(
-            pool.map(lambda item: run_one(item[0], item[1], item[2], time_limit_s, balance), work)
-        )
+        rows = list(pool.map(lambda item: run_one(item[0], item[1], item[2], time_limit_s), work))
     totals = {
         style: {
             "checkpoints": sum(r["checkpoints"] for r in rows if r["controller"] == style),
@@ -86,7 +81,6 @@ def run_ladder(
         "runs": rows,
         "totals": totals,
         "jobs": jobs,
-        "balance": balance,
         "time_limit_s": time_limit_s,
         "wall_s": round(time.monotonic() - started, 1),
     }

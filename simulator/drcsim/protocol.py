@@ -7,7 +7,6 @@ from typing import Any
 
 import msgpack
 
-from drcsim.commands import BALANCE
 from drcsim.driving import DIRECTIONS
 from drcsim.errors import ProtocolError
 from drcsim.models.humanoid import JOINT_NAMES
@@ -20,10 +19,9 @@ OPS = ("hello", "state", "step", "joints", "behaviour", "stop")
 # Behaviour name -> its parameters and their kinds ("hand", "vec3", "float", "bool", "direction").
 BEHAVIOURS: dict[str, dict[str, str]] = {
     "none": {},
-    "stand": {"balance": "balance?"},
+    "stand": {},
     "walk": {
         "pose": "vec3",
-        "balance": "balance?",
         "step_length": "float?",
         "step_height": "float?",
         "step_time": "float?",
@@ -69,10 +67,6 @@ def _check_param(kind: str, value: Any, where: str) -> Any:
     if kind == "bool":
         if not isinstance(value, bool):
             raise ProtocolError(f"{where} must be true or false")
-        return value
-    if kind == "balance":
-        if value not in BALANCE:
-            raise ProtocolError(f"{where} must be one of {BALANCE}")
         return value
     if kind == "frame":
         if value not in FRAMES:

@@ -76,8 +76,6 @@ def test_ladder_runs_reference_controllers_over_the_network_and_prints_the_table
         "8",
         "--jobs",
         "2",
-        "--balance",
-        "joints",
     )
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
@@ -91,4 +89,3 @@ def test_ladder_runs_reference_controllers_over_the_network_and_prints_the_table
         )
         assert 0 <= row["checkpoints"] <= 4
     assert result["totals"]["naive"]["of"] == 4 and result["jobs"] == 2
-    assert result["balance"] == "joints"

@@ -91,9 +91,9 @@ def test_walking_too_fast_falls(make_sim) -> None:
     assert state["score"]["falls"] == 1 and "struggling" in state["behaviour"]["walk"]
 
 
-def test_balance_must_be_harness_or_joints() -> None:
-    with pytest.raises(ProtocolError, match="balance"):
-        check_command({"op": "behaviour", "name": "walk", "pose": [1, 0, 0], "balance": "magic"})
+def test_balance_is_no_parameter_any_more() -> None:
+    with pytest.raises(ProtocolError, match="balance"):  # the walker is the only balance
+        check_command({"op": "behaviour", "name": "walk", "pose": [1, 0, 0], "balance": "joints"})
 
 
 def test_joint_walking_is_deterministic(make_sim) -> None:
