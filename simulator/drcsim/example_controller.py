@@ -208,8 +208,9 @@ class ExampleController:
             self.gave_up = str(exc)
             self.log(f"gave up: {exc}")
         except ClientError:
-            if self.final_score is None:
-                raise  # a real failure, not the server going away after the run ended
+            # A real failure, not a command refused (or the server going away) after the end.
+            if self.final_score is None and not self.client.state()["score"]["ended"]:
+                raise
         if self.final_score is None:
             self.final_score = dict(self.client.state()["score"])
         self.log(f"score {self.final_score}")
@@ -253,7 +254,12 @@ class ExampleController:
             self.log(f"{name}: {self.client.state()['score']}")
         self.client.behaviour("drive", direction="neutral", brake=1.0, hand_brake=True)
         self.advance(2.0)
-        self.client.behaviour("exit_vehicle")
+        for _ in range(10):  # still rolling after 2 s of braking: wait until it stands
+            if self.client.try_behaviour("exit_vehicle").get("ok"):
+                break
+            self.advance(1.0)
+        else:
+            self.client.behaviour("exit_vehicle")
         state = self.advance(2.0)  # let it settle on its feet beside the door
         gx, gy, gyaw = course["gates"]["gate_3"]["pose"]
         c, s = math.cos(gyaw), math.sin(gyaw)
