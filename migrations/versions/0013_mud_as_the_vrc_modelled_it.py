@@ -8,12 +8,11 @@ Create Date: 2026-11-23 09:40:00
 from __future__ import annotations
 
 import copy
-from datetime import UTC, datetime
 from typing import Any
 
-import sqlalchemy as sa
-from alembic import op
-from drcsim.worlds import WORLD_NAMES, check_document, document_digest, shipped_document
+from drcsim.worlds import WORLD_NAMES, shipped_document
+
+from migrations.stored_worlds import rewrite
 
 revision = "0013"
 down_revision = "0012"
@@ -23,17 +22,6 @@ depends_on = None
 MUD_FIELDS = ("friction", "depth", "damping")
 # For a mud patch the shipped world does not have: config 1's mud of vrc_task_2.
 DEFAULT_MUD = {"friction": 1.0, "depth": 0.08, "damping": 150.0}
-
-worlds = sa.table(
-    "worlds",
-    sa.column("id", sa.Integer),
-    sa.column("name", sa.String),
-    sa.column("version", sa.Integer),
-    sa.column("digest", sa.String),
-    sa.column("document", sa.JSON),
-    sa.column("updated_at", sa.DateTime),
-)
-
 
 def _mud_fields(patch: dict[str, Any] | None) -> dict[str, Any]:
     return {k: patch[k] for k in MUD_FIELDS if patch and k in patch}
@@ -66,27 +54,7 @@ def migrated(document: dict[str, Any], shipped: dict[str, Any] | None) -> dict[s
 def upgrade() -> None:
     # Stored documents made before drcsim modelled mud as the VRC did no longer load (their
     # mud has `stiffness` and no `depth`): they take the shipped worlds' mud, a new version.
-    connection = op.get_bind()
-    now = datetime.now(UTC).replace(tzinfo=None)  # stored as naive UTC, as UTCDateTime does
-    rows = connection.execute(
-        sa.select(worlds.c.id, worlds.c.name, worlds.c.version, worlds.c.document)
-    ).all()
-    for row in rows:
-        shipped = shipped_document(row.name) if row.name in WORLD_NAMES else None
-        document = migrated(row.document, shipped)
-        if document is None:
-            continue
-        check_document(document)
-        connection.execute(
-            worlds.update()
-            .where(worlds.c.id == row.id)
-            .values(
-                version=row.version + 1,
-                digest=document_digest(document),
-                document=document,
-                updated_at=now,
-            )
-        )
+    rewrite(lambda name, doc: migrated(doc, shipped_document(name) if name in WORLD_NAMES else None))
 
 
 def downgrade() -> None:

@@ -8,27 +8,14 @@ Create Date: 2026-11-23 10:00:00
 from __future__ import annotations
 
 import copy
-from datetime import UTC, datetime
 from typing import Any
 
-import sqlalchemy as sa
-from alembic import op
-from drcsim.worlds import check_document, document_digest
+from migrations.stored_worlds import rewrite
 
 revision = "0014"
 down_revision = "0013"
 branch_labels = None
 depends_on = None
-
-worlds = sa.table(
-    "worlds",
-    sa.column("id", sa.Integer),
-    sa.column("version", sa.Integer),
-    sa.column("digest", sa.String),
-    sa.column("document", sa.JSON),
-    sa.column("updated_at", sa.DateTime),
-)
-
 
 def migrated(document: dict[str, Any]) -> dict[str, Any] | None:
     """Return `document` without `walk_speed` in its terrain and overrides; None if it had none."""
@@ -47,24 +34,7 @@ def migrated(document: dict[str, Any]) -> dict[str, Any] | None:
 def upgrade() -> None:
     # The walker walks at the speed its gait and the ground give it: a stored world's
     # `walk_speed` means nothing any more, so it goes (a new version of the document).
-    connection = op.get_bind()
-    now = datetime.now(UTC).replace(tzinfo=None)  # stored as naive UTC, as UTCDateTime does
-    rows = connection.execute(sa.select(worlds.c.id, worlds.c.version, worlds.c.document)).all()
-    for row in rows:
-        document = migrated(row.document)
-        if document is None:
-            continue
-        check_document(document)
-        connection.execute(
-            worlds.update()
-            .where(worlds.c.id == row.id)
-            .values(
-                version=row.version + 1,
-                digest=document_digest(document),
-                document=document,
-                updated_at=now,
-            )
-        )
+    rewrite(lambda _name, document: migrated(document))
 
 
 def downgrade() -> None:

@@ -43,6 +43,9 @@ def _broken(change: str) -> dict:
         doc["configs"]["4"]["objects"]["gate_1"]["pose"] = [20.0, "left"]
     elif change == "typo":
         doc["configs"]["3"]["grund"] = {"friction": 0.5}
+    elif change == "terrain":  # a field the terrain no longer has (the harness's walk speed)
+        doc = copy.deepcopy(shipped_document("vrc_task_2"))
+        doc["configs"]["3"]["terrain"]["rubble"]["walk_speed"] = 0.55
     return doc
 
 
@@ -55,6 +58,7 @@ def _broken(change: str) -> dict:
         ("override", "configuration overrides unknown object 'gate_9'"),
         ("pose", "vrc_task_1.configs.4.objects.gate_1.pose: must be a list of 3 numbers"),
         ("typo", "vrc_task_1.configs.3: unknown field(s) grund"),
+        ("terrain", "vrc_task_2.configs.3.terrain.rubble: unknown field(s) walk_speed"),
     ],
 )
 def test_a_broken_document_is_refused_saying_where(change: str, says: str) -> None:

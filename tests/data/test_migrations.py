@@ -80,9 +80,9 @@ def test_0012_ends_a_second_live_run_of_a_task_with_the_reason(
 
 
 def _stored_world_becomes_shipped(
-    make_config: Callable[..., Config], revision: str, old: dict, what: str
+    make_config: Callable[..., Config], revision: str, old: dict, what: str, version: int = 2
 ) -> None:
-    """Store `old` as vrc_task_2 at `revision`, upgrade: it is the shipped world, version 2."""
+    """Store `old` as vrc_task_2 at `revision`, upgrade: it is the shipped world, `version`."""
     shipped = shipped_document("vrc_task_2")
     assert old != shipped
     app = create_app(make_config())
@@ -95,7 +95,7 @@ def _stored_world_becomes_shipped(
     migrate.upgrade(app)
     with app.app_context():
         world = db.session.scalars(select(World).where(World.name == "vrc_task_2")).one()
-        assert world.document == shipped and world.version == 2
+        assert world.document == shipped and world.version == version
         assert world.digest == document_digest(shipped)
         others = db.session.scalars(select(World).where(World.name != "vrc_task_2")).all()
         assert {w.version for w in others} == {1}, f"no {what}: untouched"
@@ -113,6 +113,20 @@ def test_0013_gives_stored_worlds_with_the_old_soft_mud_the_shipped_mud(
             patch.update(friction=0.3, stiffness=20000.0)
     assert old["terrain"][0]["kind"] == "mud"
     _stored_world_becomes_shipped(make_config, "0012", old, "mud")
+
+
+def test_a_world_stored_before_0013_reaches_the_shipped_world(
+    make_config: Callable[..., Config],
+) -> None:
+    # as 0012 held it: the soft-slab mud and every patch's walk_speed (0013, then 0014)
+    old = copy.deepcopy(shipped_document("vrc_task_2"))
+    for patch in old["terrain"]:
+        patch["walk_speed"] = 0.5
+        if patch["kind"] == "mud":
+            patch.pop("depth")
+            patch.update(stiffness=40000.0, damping=2000.0)
+    old["configs"]["5"]["terrain"]["mud"] = {"friction": 0.2, "stiffness": 10000.0}
+    _stored_world_becomes_shipped(make_config, "0012", old, "change", version=3)
 
 
 def test_0014_takes_walk_speed_out_of_stored_worlds(make_config: Callable[..., Config]) -> None:

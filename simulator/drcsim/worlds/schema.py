@@ -21,6 +21,7 @@ TERRAIN_FIELDS = {
     "rubble": ("blocks", "max_height", "friction"),
     "hill": ("rise", "slope"),
 }
+TERRAIN_OPTIONAL = {"mud": (), "rubble": ("density",), "hill": ("friction",)}  # with defaults
 BODIES = ("robot", "vehicle", "hose")
 QUANTITY_CONDITIONS = ("at_least", "at_most", "increase")
 TOP_REQUIRED = ("name", "title", "time_limit_s", "ground", "robot", "objects", "terrain")
@@ -100,12 +101,16 @@ def check_terrain(patch: dict[str, Any], where: str) -> None:
     kind = patch.get("kind")
     if kind not in TERRAIN_FIELDS:
         raise _fail(f"{where}.kind", f"must be one of {', '.join(TERRAIN_FIELDS)}")
+    optional = TERRAIN_OPTIONAL[kind]
+    _only(patch, ("id", "kind", "min", "max", *TERRAIN_FIELDS[kind], *optional), where)
     _vector(patch.get("min"), f"{where}.min", 2)
     _vector(patch.get("max"), f"{where}.max", 2)
     if any(lo >= hi for lo, hi in zip(patch["min"], patch["max"], strict=True)):
         raise _fail(where, "min must be below max on both axes")
     for name in TERRAIN_FIELDS[kind]:
         _number(patch.get(name), f"{where}.{name}", 0.0)
+    for name in (n for n in optional if n in patch):
+        _number(patch[name], f"{where}.{name}", 0.0)
     if kind == "rubble" and not (isinstance(patch["blocks"], int) and patch["blocks"] <= 500):
         raise _fail(f"{where}.blocks", "must be a whole number up to 500")
 
