@@ -57,7 +57,6 @@ class Behaviours:
         # The run starts with the robot standing on its feet, balanced by the walker through
         # its leg joints: nothing else holds it up.
         self.walker = Walker(scene, controller)
-        self.walker_on = True
 
     # -- joint ownership ----------------------------------------------------------------------
     def owner(self, joint: str) -> str | None:
@@ -85,8 +84,8 @@ class Behaviours:
         if self.seat.seated and name in ("stand", "walk", "none"):
             raise CommandError(f"{name} is not possible in the vehicle (exit_vehicle first)")
         if name == "none":
-            self.mode = "none"
             self._release_legs()
+            self.mode = "none"
             self.reaches.clear()
         elif name in ("stand", "walk"):
             self._balance(name, params, fallen)
@@ -117,8 +116,8 @@ class Behaviours:
             self.grasps.open(params["hand"])
         elif name == "enter_vehicle":
             self.seat.enter()
-            self.mode = "seated"
             self._release_legs()
+            self.mode = "seated"
             self.reaches.clear()
         elif name == "exit_vehicle":
             self.seat.check_exit()
@@ -150,19 +149,23 @@ class Behaviours:
         self.valve.cancel(side)
         self.driver.stop(side)
 
+    @property
+    def walker_on(self) -> bool:
+        """Return whether the walker holds the legs (standing or walking)."""
+        return self.mode in ("stand", "walk")
+
     def _release_legs(self) -> None:
         """Take the legs from the walker (stock gains): the team's commands or the seat own them."""
         if self.walker_on:
             self.walker.release()
-        self.walker_on = False
 
     def _hand_to_walker(self, reset: bool) -> None:
-        """Give the legs to the walker; `reset` takes the robot as it stands now."""
+        """Give the legs to the walker (before the mode says so); `reset` takes the robot as
+        it stands now."""
         if not self.walker_on:
             self.walker.use_gains()
         if reset or not self.walker_on:
             self.walker.reset()
-        self.walker_on = True
 
     def _balance(self, name: str, params: dict[str, Any], fallen: bool) -> None:
         """Stand or walk with the walker: only the leg joints hold the robot up."""

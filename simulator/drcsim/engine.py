@@ -54,7 +54,7 @@ class Simulation:
         self.controller = JointController(
             self.client, self.scene.robot, self.scene.robot_joints, TIMESTEP
         )
-        self.mud = MudDrag(self.client, self.scene.robot, self.scene.mud)
+        self.mud = MudDrag(self.client, self.scene.robot, self.scene.mud, TIMESTEP)
         self.drive = (
             VehicleDrive(self.client, self.scene.vehicle, self.scene.vehicle_joints)
             if self.scene.vehicle is not None
@@ -143,7 +143,7 @@ class Simulation:
         while done < count and not self.ended:
             self.behaviours.apply()
             self.controller.apply()
-            self.mud.apply(self.step_count, TIMESTEP)
+            self.mud.apply(self.step_count)
             self.client.stepSimulation()
             self.step_count += 1
             done += 1

@@ -202,6 +202,7 @@ class Swing:
     first: int
     last: int
     floor: tuple[float, ...] = ()  # lowest the sole may pass, at 0, 0.1, .. 1 of the way
+    touched: Foothold | None = None  # where it touched down above the planned ground, if so
 
 
 def _hold(

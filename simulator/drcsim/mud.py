@@ -54,12 +54,17 @@ class MudPit:
 class MudDrag:
     """Drags at the robot's links that are in the mud: a force against each one's velocity."""
 
-    def __init__(self, client: BulletClient, body: int, pits: list[MudPit]) -> None:
+    def __init__(
+        self, client: BulletClient, body: int, pits: list[MudPit], timestep: float
+    ) -> None:
         self.client, self.body, self.pits = client, body, pits
         count = client.getNumJoints(body)
-        self.masses = {link: client.getDynamicsInfo(body, link)[0] for link in range(-1, count)}
+        # Never more drag than takes MAX_VELOCITY_SHARE of a link's own momentum in a step.
+        self.bounds = {
+            link: MAX_VELOCITY_SHARE * client.getDynamicsInfo(body, link)[0] / timestep
+            for link in range(-1, count)
+        }
         self.dragged: list[tuple[int, float]] = []  # (link, N s/m); -1 is the base
-        self.scales: list[tuple[int, float]] = []  # the same, each bounded for its mass
 
     def refresh(self) -> None:
         """Find the links in the mud and the drag on each (by how deep it is in)."""
@@ -74,24 +79,19 @@ class MudDrag:
                 lower, upper = self.client.getAABB(body, link)
                 share = pit.immersion(lower, upper)
                 if share >= MIN_IMMERSION:
-                    dragged.append((link, pit.damping * share))
+                    dragged.append((link, min(pit.damping * share, self.bounds[link])))
         self.dragged = dragged
 
-    def apply(self, step: int, timestep: float) -> None:
+    def apply(self, step: int) -> None:
         """Set this physics step's drag forces (a step's external forces last one step)."""
         if self.pits and step % REFRESH_STEPS == 0:
             self.refresh()
-            # Never more than takes MAX_VELOCITY_SHARE of the link's own momentum in a step.
-            self.scales = [
-                (link, min(damping, MAX_VELOCITY_SHARE * self.masses[link] / timestep))
-                for link, damping in self.dragged
-            ]
-        if not self.scales:
+        if not self.dragged:
             return
         client, body = self.client, self.body
-        links = [link for link, _ in self.scales if link >= 0]
+        links = [link for link, _ in self.dragged if link >= 0]
         states = iter(client.getLinkStates(body, links, computeLinkVelocity=1) if links else [])
-        for link, scale in self.scales:
+        for link, scale in self.dragged:
             if link < 0:
                 where = client.getBasePositionAndOrientation(body)[0]
                 vx, vy, vz = client.getBaseVelocity(body)[0]

@@ -60,6 +60,9 @@ SWING_FROM_ACTUAL = 0.5  # share of the pelvis's tracking error the swing foot a
 PLAN_STEPS = 30  # steps planned at a time: then both feet down and a fresh plan
 TOUCH_FORCE = 150.0  # N on the descending swing foot that count as its touchdown...
 TOUCH_HEIGHT = 0.015  # m ...when it is this much above the ground it was planned on
+# A foothold on uneven ground moves along its heading by these (m, nearest first) until the
+# sole lies flat: height spread under it within PLACE_FLAT (m), sampled by rays cast down at
+# these offsets from the ankle (m along and across the sole, a margin round it included).
 PLACE_SHIFTS = (0.0, 0.03, -0.03, 0.06, -0.06, 0.09, -0.09, 0.12, -0.12, 0.15, -0.15, 0.18, -0.18)
 PLACE_ALONG = (-0.11, -0.035, 0.04, 0.115, 0.19)
 PLACE_ACROSS = (-0.08, -0.04, 0.0, 0.04, 0.08)
@@ -162,8 +165,6 @@ class Walker:
         self.com_measured = self._whole_com()
         self.correction_from = np.zeros(2)
         self.correction_to = np.zeros(2)
-        self.touched: Foothold | None = None
-        self.touched_swing: Swing | None = None
 
     def _yaw(self) -> float:
         _, orn = self.client.getBasePositionAndOrientation(self.scene.robot)
@@ -272,8 +273,8 @@ class Walker:
             self._check_touchdown(self.active)
         for swing in self.swings:
             if swing.last == self.tick:
-                if swing is self.touched_swing and self.touched is not None:
-                    self._land(swing, self.touched)
+                if swing.touched is not None:
+                    self._land(swing, swing.touched)
                 self.feet[swing.side] = swing.end
         if self.zmp and self.tick >= len(self.zmp) - 1:
             self._finish()
@@ -282,7 +283,7 @@ class Walker:
 
     def _check_touchdown(self, swing: Swing) -> None:
         """Stop lowering the swing foot where it meets something (a block, a bump)."""
-        if swing is self.touched_swing:
+        if swing.touched is not None:
             return
         span = max(1, swing.last - swing.first)
         if (self.tick - swing.first) / span < 0.5:
@@ -294,8 +295,7 @@ class Walker:
         # as planned (taking where the foot touched there let errors pile up step by step).
         near = math.hypot(real.x - swing.end.x, real.y - swing.end.y) < TOUCH_NEAR
         if force > TOUCH_FORCE and near and real.z > swing.end.z + TOUCH_HEIGHT:
-            self.touched_swing = swing
-            self.touched = Foothold(real.x, real.y, real.z, swing.end.yaw)
+            swing.touched = Foothold(real.x, real.y, real.z, swing.end.yaw)
 
     def _land(self, swing: Swing, where: Foothold) -> None:
         """The step ended where the foot touched down: the foot's next step starts there."""
@@ -303,7 +303,6 @@ class Walker:
         later = [w for w in self.swings if w.side == swing.side and w.first > swing.first]
         if later:
             later[0].start = where
-        self.touched, self.touched_swing = None, None
 
     def _finish(self) -> None:
         self.zmp, self.swings, self.tick = [], [], 0
@@ -324,8 +323,8 @@ class Walker:
             self.status, self.goal = f"blocked: {off:.2f} m short of the goal", None
 
     def _swing_foot(self, swing: Swing) -> Foothold:
-        if swing is self.touched_swing and self.touched is not None:
-            return self.touched
+        if swing.touched is not None:
+            return swing.touched
         span = max(1, swing.last - swing.first)
         # The same instant as the COM's interpolation (self.tick is already the next tick).
         share = ((self.steps - 1) % TICK_STEPS + 1) / TICK_STEPS

@@ -94,15 +94,15 @@ def _slide(sim, x: float) -> float:
     client = sim.client
     shape = client.createCollisionShape(client.GEOM_BOX, halfExtents=[0.13, 0.065, 0.025])
     box = client.createMultiBody(2.4, shape, -1, [x, 0.0, 0.03])
-    drag = MudDrag(client, box, sim.scene.mud)
+    drag = MudDrag(client, box, sim.scene.mud, 0.001)
     for step in range(100):
-        drag.apply(step, 0.001)
+        drag.apply(step)
         client.stepSimulation()
     client.resetBaseVelocity(box, [1.0, 0.0, 0.0])
     start = client.getBasePositionAndOrientation(box)[0][0]
     speeds = []
     for step in range(100, 400):
-        drag.apply(step, 0.001)
+        drag.apply(step)
         client.stepSimulation()
         speeds.append(client.getBaseVelocity(box)[0][0])
     # Only ever slowed (to within the contact solver's jitter at rest).
