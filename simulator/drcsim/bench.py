@@ -67,9 +67,8 @@ def measure_rtf(
 ) -> dict[str, Any]:
     """Step `world` for `seconds` of simulated time (the walker walking); return RTF and falls.
 
-    `rtf` is by wall clock, `cpu_rtf` by the
-    process's CPU time over the same steps; `split` adds where that CPU time went (the timing
-    itself costs about 1% more).
+    `rtf` is by wall clock, `cpu_rtf` by the process's CPU time over the same steps; `split`
+    adds where that CPU time went (the timing itself costs about 1% more).
     """
     published = {"bytes": 0}
 
@@ -217,8 +216,8 @@ def measure_round_trip(samples: int) -> dict[str, Any]:
 def run_bench(seconds: float, samples: int, split: bool = False) -> dict[str, Any]:
     """Return every benchmark figure.
 
-    Each world walks twice: with no sensors (the reference, measured in
-    the same run) and with every sensor subscribed. A sensor row's `cpu_vs_no_sensors` is its
+    Each world walks twice: with no sensors (the reference, measured in the same run) and
+    with every sensor subscribed. A sensor row's `cpu_vs_no_sensors` is its
     CPU time over the reference's, and `meets_target` compares its `cpu_rtf` with TARGET_RTF.
     """
     load_before = os.getloadavg()

@@ -18,7 +18,6 @@ class NaiveController(ExampleController):
     walk_past = 0.2
     search = [(0.0, 0.0)]
     grasp_search = [(0.0, 0.0)]
-    approach_door = False
     straight = True
     walk_tries = 1  # no recovery: down is out
     approach_tries = 0

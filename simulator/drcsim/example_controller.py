@@ -76,10 +76,9 @@ class ExampleController:
     walk_past = 1.0
     search = SEARCH
     grasp_search = GRASP_SEARCH
-    approach_door = True
     walk_tries = 2  # walks after a fall before giving up (1: no recovery)
     approach_tries = 2  # walks again when a walk ends short of its goal
-    straight = False  # True: straight at every goal, no approach or backing-away legs
+    straight = False  # True: straight at every goal (also the door), no backing-away legs
     avoid: tuple[str, ...] = ()  # kinds of terrain (the briefing's) walked round in task 2
     gait: dict[str, float] = {}  # the walker's defaults
 
@@ -281,7 +280,7 @@ class ExampleController:
         c, s = math.cos(car_yaw), math.sin(car_yaw)
         out = 0.0 if self.straight else DOOR_STANDOFF
         stand = (door[0] - s * out, door[1] + c * out)
-        if self.approach_door:  # come to the door from the side, not through the vehicle
+        if not self.straight:  # come to the door from the side, not through the vehicle
             self.walk(stand[0] - 2.5 * c, stand[1] - 2.5 * s, car_yaw)
         self.walk(*stand, car_yaw)
         if self.straight:
