@@ -54,6 +54,9 @@ TABLE_CLEAR = 1.9
 TABLE_STANDOFF = 0.9  # m from the table's middle to the pelvis facing it (0.3 from its edge)
 # How far from a patch of terrain the careful controller's path round it keeps (m).
 HAZARD_GAP = 0.4
+# The driver seat (where the seated pelvis is) lies this far behind the vehicle's middle and
+# left of its centre line (m): the vehicle is steered by its middle, not by the driver.
+SEAT_BEHIND, SEAT_LEFT = 0.15, 0.3
 
 
 class Down(ClientError):
@@ -299,6 +302,8 @@ class ExampleController:
         while state["t"] - start < limit_s and not state["score"]["ended"]:
             px, py, _ = state["pelvis"]["position"]
             yaw = _yaw(state["pelvis"]["orientation"])
+            c, s = math.cos(yaw), math.sin(yaw)
+            px, py = px + SEAT_BEHIND * c + SEAT_LEFT * s, py + SEAT_BEHIND * s - SEAT_LEFT * c
             if (tx - px) * math.cos(yaw) + (ty - py) * math.sin(yaw) < 0.0:
                 return  # the target is behind us: we are through
             error = math.atan2(ty - py, tx - px) - yaw
