@@ -106,6 +106,13 @@ def running_app(config: Config) -> Iterator[Flask]:
     """Create the app and its tables, and drop them afterwards."""
     app = create_app(config)
     app.test_client_class = IsolatedClient
+    # An in-process worker (celery's start_worker) stops only once its wait for a message
+    # returns: 0.1 s instead of kombu's 1 s takes ~1 s off every test that starts one.
+    celery = app.extensions["celery"]
+    celery.conf.broker_transport_options = {
+        **celery.conf.broker_transport_options,
+        "polling_interval": 0.1,
+    }
     with app.app_context():
         db.create_all()
         yield app

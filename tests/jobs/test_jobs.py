@@ -165,7 +165,10 @@ def test_a_job_saved_while_the_queue_is_down_is_sent_later(
     make_config: Callable[..., Config],
 ) -> None:
     dead = make_config(redis_url="redis://127.0.0.1:1/0", stale_job_seconds=0)
-    with running_app(dead):
+    with running_app(dead) as app:
+        # each send tries to connect for kombu's connect timeout (Celery's 4 s) before it
+        # gives up; refused at once here, so 0.5 s says the same
+        app.extensions["celery"].conf.broker_connection_timeout = 0.5
         job = enqueue("diagnostics", SYSTEM)
         db.session.commit()  # the message cannot be sent: the row stays, queued
         assert job.state == JobState.QUEUED
