@@ -63,11 +63,24 @@ def encryption_key() -> str:
     return Fernet.generate_key().decode()
 
 
+@pytest.fixture(scope="session")
+def wheelhouse_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The machines' wheelhouses and CloudSim's bundle, shared by every instance of the session.
+
+    A launch builds them into its instance's `wheelhouse/` once per version of the source
+    and reuses them afterwards (pip: ~20 s for drcsim's and csrouter's wheels, ~30 s for the
+    bundle on the 2-core machine): the session's first launch builds them, later ones take
+    the cache, as a long-lived instance's launches do.
+    """
+    return tmp_path_factory.mktemp("wheelhouse")
+
+
 @pytest.fixture
 def make_config(
-    tmp_path: Path, redis_server: RedisServer, encryption_key: str
+    tmp_path: Path, redis_server: RedisServer, encryption_key: str, wheelhouse_cache: Path
 ) -> Callable[..., Config]:
-    """Build a test Config: its own instance folder, the session's Redis (flushed)."""
+    """Build a test Config: its own instance folder (sharing the session's wheelhouse cache),
+    the session's Redis (flushed)."""
 
     def build(database_url: str | None = None, **overrides: object) -> Config:
         url = redis_server.url(0)
@@ -84,7 +97,11 @@ def make_config(
         }
         if database_url:
             env["CLOUDSIM_DATABASE_URL"] = database_url
-        return Config.from_env(env, testing=True, **overrides)
+        config = Config.from_env(env, testing=True, **overrides)
+        cache = config.instance_dir / "wheelhouse"
+        if not cache.exists():
+            cache.symlink_to(wheelhouse_cache, target_is_directory=True)
+        return config
 
     return build
 
