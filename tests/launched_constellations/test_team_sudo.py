@@ -1,30 +1,22 @@
 """The team-sudo toggle as a stranger uses it: the page's button really submitted, the API
-called with the documented body; each change audited and pushed, also one made while the
-constellation was still launching (that one on local hosts)."""
+called with the documented body; each change audited and pushed. One made while the
+constellation is still launching is pushed once it is ready: on local hosts, in
+test_local_launch.py (beside a second launch, not a launch of its own)."""
 
 from __future__ import annotations
 
 import re
 
-import pytest
 from flask import Flask
 from flask.testing import FlaskClient
 from sqlalchemy import func, select
 
 from cloudsim.auth.policy import SYSTEM
-from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service
-from cloudsim.launched_constellations.connect import machine_host_keys, targets
-from cloudsim.launched_constellations.keys import constellation_keypair
-from cloudsim.models import AuditEvent, Constellation, Job, JobState, User
-from cloudsim.people.service import create_team
-from constellations.plans.roles import TEAM_SUDOERS
-from provisioners.remote.ssh import SSHExecutor
+from cloudsim.models import AuditEvent, Constellation, Job, User
 from tests.competition.support import ready_constellation
 from tests.conftest import csrf_token, log_in, token_for
-from tests.launched_constellations.conftest import finished
-from tests.support.servers import wait_for
 
 
 def _constellation(team_id: int, kind: str = "vrc") -> Constellation:
@@ -93,38 +85,3 @@ def test_the_api_takes_the_documented_body_and_refuses_bad_input(
         "/api/v1/constellations/999999", json={"team_sudo": True}, headers=headers
     )
     assert missing.status_code == 404
-
-
-@pytest.mark.hosts
-def test_sudo_allowed_while_launching_reaches_the_field_computers_once_ready(
-    constellations_app: Flask, constellations_worker: None, constellations_config: Config
-) -> None:
-    team = create_team(SYSTEM, "Late sudoers")
-    constellation, job = service.launch(
-        SYSTEM, name="sudolate", kind="vrc", provider="local", team_id=team.id
-    )
-    db.session.commit()  # the test is the boundary: its commit sends the launch job
-
-    def verifying() -> bool:
-        db.session.expire_all()
-        return db.session.get(Job, job.id).stage == "verify"  # type: ignore[union-attr]
-
-    wait_for(verifying, 600, "the verify stage (the field computers are installed)")
-    service.set_team_sudo(SYSTEM, constellation.id, True)
-    db.session.commit()
-    assert _refreshes(constellation) == 0  # still launching: nothing pushes it now
-    done = finished(job.id)
-    assert done.state == JobState.SUCCEEDED, f"{done.error}\n{done.log[-3000:]}"
-    assert "changed during the launch" in done.log
-    refresh = db.session.scalar(
-        select(Job).where(
-            Job.kind == "constellation.refresh_access", Job.target_id == constellation.id
-        )
-    )
-    assert refresh is not None and finished(refresh.id).state == JobState.SUCCEEDED
-    db.session.refresh(constellation)
-    keys = constellation_keypair(constellation)
-    reach = targets(constellation, keys, constellations_config)
-    with SSHExecutor(machine_host_keys(constellation), secrets=[keys.private]) as executor:
-        sudoers = executor.run(reach["fc1"], f"cat {TEAM_SUDOERS}", check=False)
-    assert sudoers.ok and "NOPASSWD" in sudoers.stdout, sudoers.stderr
