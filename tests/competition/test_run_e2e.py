@@ -46,7 +46,8 @@ from tests.web.test_browser import log_in_page, webgl_chromium
 
 pytestmark = [pytest.mark.hosts, pytest.mark.browser]
 ZONE = "Europe/Berlin"
-RUN_SECONDS = 25  # simulated: the example controller, on the walker, passes gate_1 (at ~16 s)
+RUN_SECONDS = 25  # simulated: time to watch it live; gate_1 (moved to 1.5 m) is passed at ~7.5 s
+GATE_1 = [1.5, 0.0, 0.0]  # not 4 m: a stopped run stops once it scored, ~8 s earlier
 
 
 @pytest.fixture
@@ -102,6 +103,7 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     # the run is built from the world CloudSim holds (here an updated one), not drcsim's copy
     world = shipped_document("vrc_task_2")
     world["title"] += ", as this CloudSim holds it"
+    next(o for o in world["objects"] if o["id"] == "gate_1")["pose"] = GATE_1
     update_world(SYSTEM, world)
     db.session.commit()
 
