@@ -57,6 +57,9 @@ HAZARD_GAP = 0.4
 # The driver seat (where the seated pelvis is) lies this far behind the vehicle's middle and
 # left of its centre line (m): the vehicle is steered by its middle, not by the driver.
 SEAT_BEHIND, SEAT_LEFT = 0.15, 0.3
+# Carrying the hose to the standpipe the hand is this high over the pelvis (m): the hose
+# then passes under the valve wheel (its rim 1.18 m up), which it met carried at 0.35.
+CARRY_LOW = 0.2
 
 
 class Down(ClientError):
@@ -346,7 +349,16 @@ class ExampleController:
             c, s = math.cos(pipe_yaw), math.sin(pipe_yaw)
             return (point[0] + c * forward - s * left, point[1] + s * forward + c * left)
 
-        self.walk(*near(inlet, -0.45, 0.3), pipe_yaw)
+        gx, gy = near(inlet, -0.45, 0.3)
+        if not self.straight:
+            # Square to the standpipe and sideways first, then straight at it: no long
+            # diagonal with the hose swinging from the hand (on one foot, its swing spun the
+            # stance foot and the robot fell), no turning with it at the end.
+            here = self.client.state()["pelvis"]["position"]
+            ahead = (gx - here[0]) * math.cos(pipe_yaw) + (gy - here[1]) * math.sin(pipe_yaw)
+            self.shuffle(gx - ahead * math.cos(pipe_yaw), gy - ahead * math.sin(pipe_yaw), pipe_yaw)
+            self.reach("right", [0.45, -0.3, CARRY_LOW], frame="pelvis")
+        self.walk(gx, gy, pipe_yaw)
         # Line the coupler up in front of the inlet, then push it home.
         for dx, dy in self.search:
             self.reach("right", [*near(inlet, -0.15 + dx, dy), inlet[2]], tool=True)
