@@ -66,6 +66,12 @@ class Down(ClientError):
     """The robot fell and the controller does not get it up: it gives up the run."""
 
 
+def vehicle_middle(px: float, py: float, yaw: float) -> tuple[float, float]:
+    """The vehicle's middle from the seated pelvis (SEAT_BEHIND behind it, SEAT_LEFT left)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return px + SEAT_BEHIND * c + SEAT_LEFT * s, py + SEAT_BEHIND * s - SEAT_LEFT * c
+
+
 def _yaw(orientation: list[float]) -> float:
     x, y, z, w = orientation
     return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
@@ -307,8 +313,7 @@ class ExampleController:
         while state["t"] - start < limit_s and not state["score"]["ended"]:
             px, py, _ = state["pelvis"]["position"]
             yaw = _yaw(state["pelvis"]["orientation"])
-            c, s = math.cos(yaw), math.sin(yaw)
-            px, py = px + SEAT_BEHIND * c + SEAT_LEFT * s, py + SEAT_BEHIND * s - SEAT_LEFT * c
+            px, py = vehicle_middle(px, py, yaw)
             if (tx - px) * math.cos(yaw) + (ty - py) * math.sin(yaw) < 0.0:
                 return  # the target is behind us: we are through
             error = math.atan2(ty - py, tx - px) - yaw

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 
 import pytest
-from drcsim.commands import CommandAPI
 from drcsim.controllers import CarefulController
-from drcsim.example_controller import ExampleController
+from drcsim.example_controller import ExampleController, vehicle_middle
 from drcsim.local import LocalClient
+from drcsim.models import vehicle
 from drcsim.worlds import shipped_document
 
 
@@ -95,24 +96,10 @@ def test_the_careful_controller_walks_round_the_rubble_and_through_the_gate(make
 def test_the_controllers_steer_the_vehicle_by_its_middle_not_by_the_driver() -> None:
     # The driver sits 0.3 m left of the vehicle's centre line: steering the driver's pelvis
     # at a gate put the vehicle 0.3 m right of it, and on top of the estimate's drift in
-    # task 1 configurations 4 and 5 its right front wheel met gate_2's post.
-    class Seated(CommandAPI):
-        def __init__(self) -> None:
-            self.steering: list[float] = []
-            self.t = 0.0
-
-        def request(self, message: dict) -> dict:
-            if message["op"] == "hello":
-                return {"ok": True, "lockstep": True, "timestep": 0.001}
-            if message["op"] == "behaviour":
-                self.steering.append(message["steering_wheel"])
-                return {"ok": True}
-            self.t += 0.1 if message["op"] == "step" else 0.0
-            # Vehicle middle on y = 0 heading +x: the pelvis 0.15 m behind it and 0.3 m left.
-            pelvis = {"position": [-0.15, 0.3, 0.9], "orientation": [0.0, 0.0, 0.0, 1.0]}
-            score = {"checkpoints": 1, "falls": 0, "ended": self.t > 0.3, "reason": None}
-            return {"ok": True, "state": {"t": self.t, "pelvis": pelvis, "score": score}}
-
-    client = Seated()
-    ExampleController(client)._drive_through(20.0, 0.0)
-    assert client.steering and all(abs(s) < 1e-9 for s in client.steering)
+    # task 1 configurations 4 and 5 its right front wheel met gate_2's post. The controller
+    # knows the seat from the README; it must agree with where the seat assist puts the pelvis.
+    seat_x, seat_y, _ = vehicle.SEAT_PELVIS_XYZ
+    for car_x, car_y, yaw in ((0.0, 0.0, 0.0), (38.7, -2.2, 0.6), (-3.0, 5.0, -2.5)):
+        c, s = math.cos(yaw), math.sin(yaw)
+        pelvis = (car_x + seat_x * c - seat_y * s, car_y + seat_x * s + seat_y * c)
+        assert vehicle_middle(*pelvis, yaw) == pytest.approx((car_x, car_y), abs=1e-9)
