@@ -5,10 +5,13 @@ from __future__ import annotations
 import itertools
 from datetime import timedelta
 from pathlib import Path
+from typing import Any
 
+from drcsim.worlds import shipped_document
 from flask import current_app
 from sqlalchemy import update
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.competition.artifacts import LogStore, file_sha256
 from cloudsim.extensions import db
 from cloudsim.models import (
@@ -20,6 +23,7 @@ from cloudsim.models import (
     Task,
     utcnow,
 )
+from cloudsim.worlds.service import update_world
 
 _names = itertools.count(1)
 SCORE_LOG = (
@@ -99,3 +103,14 @@ def ready_constellation(constellation_id: int) -> None:
         .values(state=ConstellationState.READY)
     )
     db.session.commit()
+
+
+def hold_task_2_with_gate_1_near(title_suffix: str = "") -> dict[str, Any]:
+    """Make the world CloudSim holds for vrc_task_2 an updated one with gate_1 at 1.5 m
+    instead of 4, and return it: the example controller passes it at ~7.5 s simulated, not
+    ~16 s, so a run that must score is short."""
+    world = shipped_document("vrc_task_2")
+    world["title"] += title_suffix
+    next(o for o in world["objects"] if o["id"] == "gate_1")["pose"] = [1.5, 0.0, 0.0]
+    update_world(SYSTEM, world)
+    return world

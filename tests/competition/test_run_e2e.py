@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from celery.contrib.testing.worker import start_worker
 from csrouter.bandwidth_log import read_bandwidth_log
-from drcsim.worlds import document_digest, shipped_document
+from drcsim.worlds import document_digest
 from flask import Flask
 from playwright.sync_api import Browser, expect
 from werkzeug.serving import make_server
@@ -36,7 +36,7 @@ from cloudsim.extensions import db
 from cloudsim.launched_constellations import service as constellations
 from cloudsim.models import JobState, Role, Run, RunState, Team, User, utcnow
 from cloudsim.people import service as people_service
-from cloudsim.worlds.service import update_world
+from tests.competition.support import hold_task_2_with_gate_1_near
 from tests.conftest import make_user, token_for
 from tests.launched_constellations.conftest import finished
 from tests.support.servers import wait_for
@@ -47,7 +47,6 @@ from tests.web.test_browser import log_in_page, webgl_chromium
 pytestmark = [pytest.mark.hosts, pytest.mark.browser]
 ZONE = "Europe/Berlin"
 RUN_SECONDS = 25  # simulated: time to watch it live; gate_1 (moved to 1.5 m) is passed at ~7.5 s
-GATE_1 = [1.5, 0.0, 0.0]  # not 4 m: a stopped run stops once it scored, ~8 s earlier
 
 
 @pytest.fixture
@@ -101,10 +100,7 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
         assert done.state == JobState.SUCCEEDED, f"{done.error}\n{done.log[:6000]}"
 
     # the run is built from the world CloudSim holds (here an updated one), not drcsim's copy
-    world = shipped_document("vrc_task_2")
-    world["title"] += ", as this CloudSim holds it"
-    next(o for o in world["objects"] if o["id"] == "gate_1")["pose"] = GATE_1
-    update_world(SYSTEM, world)
+    world = hold_task_2_with_gate_1_near(", as this CloudSim holds it")
     db.session.commit()
 
     page = browser.new_context().new_page()

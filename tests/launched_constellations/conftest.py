@@ -10,8 +10,10 @@ from pathlib import Path
 import pytest
 from celery.contrib.testing.worker import start_worker
 from flask import Flask
+from sqlalchemy import select
 
 from cloudsim.config import Config
+from cloudsim.extensions import db
 from cloudsim.models import Job
 from cloudsim.providers.service import open_provider
 from tests.conftest import running_app
@@ -88,3 +90,15 @@ def leftovers(config: Config) -> dict[str, list[str]]:
         if state.exists()
         else [],
     }
+
+
+def access_refreshes(constellation_id: int) -> list[Job]:
+    """The jobs that pushed a constellation's access (team sudo, keys) to its machines."""
+    db.session.expire_all()
+    return list(
+        db.session.scalars(
+            select(Job).where(
+                Job.kind == "constellation.refresh_access", Job.target_id == constellation_id
+            )
+        )
+    )

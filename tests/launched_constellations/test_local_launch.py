@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import pytest
 from flask import Flask
-from sqlalchemy import select
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
@@ -18,7 +17,7 @@ from cloudsim.models import Constellation, ConstellationState, Job, JobState, Ma
 from cloudsim.people.service import create_team
 from constellations.plans.roles import TEAM_SUDOERS
 from provisioners.remote.ssh import SSHExecutor
-from tests.launched_constellations.conftest import finished, leftovers
+from tests.launched_constellations.conftest import access_refreshes, finished, leftovers
 from tests.support.servers import wait_for
 
 pytestmark = pytest.mark.hosts
@@ -81,7 +80,7 @@ def _sudo_while_launching(constellation: Constellation, job: Job) -> None:
     wait_for(verifying, 600, "the verify stage (the field computers are installed)")
     service.set_team_sudo(SYSTEM, constellation.id, True)
     db.session.commit()
-    assert _refreshes(constellation) == []  # still launching: nothing pushes it now
+    assert access_refreshes(constellation.id) == []  # still launching: nothing pushes it now
 
 
 def _sudo_reaches_the_field_computers(
@@ -89,7 +88,7 @@ def _sudo_reaches_the_field_computers(
 ) -> None:
     """The launch, once ready, pushes the change it missed; the team account has sudo on fc1."""
     assert "changed during the launch" in done.log
-    (refresh,) = _refreshes(constellation)
+    (refresh,) = access_refreshes(constellation.id)
     assert finished(refresh.id).state == JobState.SUCCEEDED
     db.session.refresh(constellation)
     keys = constellation_keypair(constellation)
@@ -97,14 +96,3 @@ def _sudo_reaches_the_field_computers(
     with SSHExecutor(machine_host_keys(constellation), secrets=[keys.private]) as executor:
         sudoers = executor.run(reach["fc1"], f"cat {TEAM_SUDOERS}", check=False)
     assert sudoers.ok and "NOPASSWD" in sudoers.stdout, sudoers.stderr
-
-
-def _refreshes(constellation: Constellation) -> list[Job]:
-    db.session.expire_all()
-    return list(
-        db.session.scalars(
-            select(Job).where(
-                Job.kind == "constellation.refresh_access", Job.target_id == constellation.id
-            )
-        )
-    )

@@ -13,7 +13,6 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-from drcsim.worlds import shipped_document
 from flask import Flask
 from playwright.sync_api import Browser, expect
 
@@ -26,9 +25,8 @@ from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair, generate_keypair
 from cloudsim.models import Constellation, Job, JobState, Role, Run, RunState
 from cloudsim.people.service import create_team, update_user
-from cloudsim.worlds.service import update_world
 from provisioners.remote.ssh import SSHExecutor, SSHTarget
-from tests.competition.support import open_task
+from tests.competition.support import hold_task_2_with_gate_1_near, open_task
 from tests.competition.test_run_e2e import browser, live_url  # noqa: F401 (fixtures)
 from tests.conftest import make_user, token_for
 from tests.launched_constellations.conftest import finished
@@ -148,9 +146,7 @@ def test_a_team_logs_in_deploys_its_code_and_scores_while_sim_stays_sealed(
 
         # alice starts the run in the browser; her process scores (at ~7.5 s: gate_1 moved to
         # 1.5 m in the world CloudSim holds; at its 4 m, ~16 s, the run had to last 25 s)
-        world = shipped_document("vrc_task_2")
-        next(o for o in world["objects"] if o["id"] == "gate_1")["pose"] = [1.5, 0.0, 0.0]
-        update_world(SYSTEM, world)
+        hold_task_2_with_gate_1_near()
         task = open_task(team.id, timeout_s=15, latency_ms=250)
         page.goto(f"{live_url}/tasks")
         page.get_by_role("button", name="Start run").click()

@@ -14,9 +14,10 @@ from sqlalchemy import func, select
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service
-from cloudsim.models import AuditEvent, Constellation, Job, User
+from cloudsim.models import AuditEvent, Constellation, User
 from tests.competition.support import ready_constellation
 from tests.conftest import csrf_token, log_in, token_for
+from tests.launched_constellations.conftest import access_refreshes
 
 
 def _constellation(team_id: int, kind: str = "vrc") -> Constellation:
@@ -35,9 +36,7 @@ def _count(model: type, *where: object) -> int:
 
 
 def _refreshes(constellation: Constellation) -> int:
-    return _count(
-        Job, Job.kind == "constellation.refresh_access", Job.target_id == constellation.id
-    )
+    return len(access_refreshes(constellation.id))
 
 
 def test_an_officer_lets_the_team_use_sudo_with_the_page_button(
