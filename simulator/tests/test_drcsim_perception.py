@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from drcsim._bullet import pybullet
 from drcsim.local import LocalClient
 from drcsim.protocol import check_command, encode
 from drcsim.sensors import SensorSettings, whole_level_noise
@@ -118,3 +119,29 @@ def test_camera_noise_is_gaussian_rounded_to_whole_levels(make_sim) -> None:
     clean, noisy = images
     inside = (clean > 10) & (clean < 245)  # away from the clipping at 0 and 255
     assert 1.8 < float(np.std((noisy - clean)[inside])) < 2.2
+
+
+def test_the_camera_draws_the_ground_as_tinyrenderer_did(make_sim) -> None:
+    # TinyRenderer draws every body but the ground plane, which `_ground` draws by its depth
+    # buffer: the image must be the one TinyRenderer gives with the plane, but for the plane's
+    # square edges (a pixel either way) and the aliased squares near the horizon.
+    settings = SensorSettings(camera_width=160, camera_height=120, camera_noise=0.0)
+    sim = make_sim("vrc_task_2", "1", sensors=settings)  # gates, mud pit, rubble, hill ahead
+    client, ground, sensors = sim.client, sim.scene.ground, sim.sensors
+    head, rotation = sensors._head_pose()
+    eye = head + rotation @ np.array([0.14, 0.035, 0.08])
+    rgba = client.getVisualShapeData(ground)[0][7]
+    drawn = np.frombuffer(sensors._render(eye, rotation, np.random.default_rng(0)), np.uint8)
+    assert client.getVisualShapeData(ground)[0][7] == rgba  # the plane's own look is kept
+    view = client.computeViewMatrix(
+        eye.tolist(), (eye + rotation[:, 0]).tolist(), rotation[:, 2].tolist()
+    )
+    tiny = np.asarray(
+        client.getCameraImage(
+            160, 120, view, sensors.projection, renderer=pybullet.ER_TINY_RENDERER
+        )[2],
+        dtype=np.uint8,
+    ).reshape(120, 160, 4)[:, :, :3]
+    same = (drawn.reshape(120, 160, 3) == tiny).all(axis=2)
+    assert same.mean() > 0.85
+    assert same[90:].mean() > 0.95  # nearer than the horizon: the edges alone differ
