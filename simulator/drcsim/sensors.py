@@ -224,7 +224,8 @@ class Sensors:
         s = self.settings
         spindle = (s.lidar_spin * sim_time) % (2 * math.pi)
         starts, ends = self._lidar_rays(spindle)
-        hits = self.scene.client.rayTestBatch(starts.tolist(), ends.tolist())
+        # The arrays as they are: pybullet reads the same doubles as from lists, without them.
+        hits = self.scene.client.rayTestBatch(starts, ends)
         span = s.lidar_range - s.lidar_min_range
         ranges = s.lidar_min_range + np.array([h[2] for h in hits]) * span
         ranges = ranges + rng.normal(0.0, s.lidar_noise, s.lidar_beams)
