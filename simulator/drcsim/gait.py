@@ -270,7 +270,7 @@ def timeline(
         swings.append(Swing(moving, feet[moving], end, first, len(zmp)))
         feet[moving] = end
         _ramp(zmp, zmp_point(feet[stance], stance), zmp_point(end, moving), ds)
-    left, right = zmp_point(feet["left"], "left"), zmp_point(feet["right"], "right")
-    middle = ((left[0] + right[0]) / 2, (left[1] + right[1]) / 2)
+    # The last steps end between the feet, where the walker then stands.
+    middle = ((feet["left"].x + feet["right"].x) / 2, (feet["left"].y + feet["right"].y) / 2)
     _ramp(zmp, zmp[-1] if zmp else start, middle, round(START_S / PREVIEW_DT))
     return zmp, swings

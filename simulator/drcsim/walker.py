@@ -9,6 +9,7 @@ but gravity, contacts and its joints: walking too fast, on rubble or a slope can
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -19,6 +20,8 @@ from drcsim.gait import (
     HIP_OFFSET,
     PREVIEW_DT,
     PREVIEW_S,
+    THIGH,
+    ZMP_AHEAD,
     Foothold,
     GaitParameters,
     PreviewAxis,
@@ -28,6 +31,7 @@ from drcsim.gait import (
     rotation,
     timeline,
     wrap_angle,
+    zmp_point,
 )
 from drcsim.models.humanoid import ALL_JOINTS
 from drcsim.scene import TICK_STEPS, Scene
@@ -69,6 +73,15 @@ PLACE_ACROSS = (-0.08, -0.04, 0.0, 0.04, 0.08)
 PLACE_FLAT = 0.01
 SWING_MARGIN = 0.03  # m the sole passes above what stands on its way
 TOUCH_NEAR = 0.04  # m from its target: nearer, a touch is a landing; further, a scrape
+STILL_SPEED = 0.05  # m/s the standing ZMP reference moves to between the feet
+# The joints whose PD is given its load: all but the hip's pitch, which holds the trunk up
+# as the IMU's pitch feedback has it (its load depends on where the centre of pressure really
+# is: 0.5 cm ahead of the ankle, not the reference's 2 cm; given that load the pelvis leaned
+# forward and in 0.8 s steps the feet landed a little shorter each step, until it fell).
+LOADED = np.array([1.0, 1.0, 0.0, 1.0, 1.0, 1.0])
+LINK_DOWN = np.array([0.0, 0.0, -THIGH])  # hip to knee (and knee to ankle: SHIN is as long)
+FOOT_COM = np.array([0.04, 0.0, -0.06])  # the foot's centre of mass from the ankle
+SOLE_SAMPLES = tuple(-0.09 + 0.26 * k / 8 for k in range(9))  # m along the sole, heel to toe
 SLOPE_SPAN = 0.1  # m either side of a foot over which the slope under it is taken
 HIPS = {  # each hip joint in the pelvis frame (the right one mirrored)
     side: np.array([HIP_OFFSET[0], sign * HIP_OFFSET[1], HIP_OFFSET[2]])
@@ -94,6 +107,18 @@ class Walker:
             self.client.getDynamicsInfo(scene.robot, link)[0]
             for link in range(-1, len(self.link_indices))
         ]
+        # What stands on a sole (N), and the weights of a leg's thigh, shin and foot.
+        self.weight = sum(self.masses) * 9.81
+        self.leg_weights = [
+            self.client.getDynamicsInfo(scene.robot, scene.robot_links[f"l_{part}"])[0] * 9.81
+            for part in ("uleg", "lleg", "foot")
+        ]
+        self.kp = {
+            side: np.array([float(GAINS[name[6:]][0]) for name in names])
+            for side, names in LEGS.items()
+        }
+        self.shares: dict[str, float] = {}
+        self.loads: dict[str, np.ndarray] = {}
         self.use_gains()
         self.reset()
 
@@ -148,6 +173,7 @@ class Walker:
         height = float(self.offset[2]) + self.params.pelvis_height
         self.axes = (PreviewAxis(height, float(com[0])), PreviewAxis(height, float(com[1])))
         self.com = com[:2].copy()
+        self.still = com[:2].copy()  # the standing ZMP reference: from here to the feet
         self.zmp: list[tuple[float, float]] = []
         self.swings: list[Swing] = []
         self.tick = 0
@@ -208,10 +234,19 @@ class Walker:
             spread = max(heights) - min(heights)
             z = self.scene.ground_height(x, y) + max(heights)
             if spread <= PLACE_FLAT:
-                return Foothold(x, y, z, foot.yaw)
+                return self._on_hill(Foothold(x, y, z, foot.yaw))
             if best is None or spread < best[0]:
                 best = (spread, Foothold(x, y, z, foot.yaw))
-        return foot if best is None else best[1]
+        found = foot if best is None else best[1]
+        return self._on_hill(found)
+
+    def _on_hill(self, foot: Foothold) -> Foothold:
+        """Return the foothold at the height of its sole resting on a hill, if on one."""
+        patch = self.scene.terrain_at(foot.x, foot.y)
+        if patch is None or patch.kind != "hill":
+            return foot
+        ground = self.scene.ground_height(foot.x, foot.y)
+        return Foothold(foot.x, foot.y, foot.z - ground + self._resting(foot)[1], foot.yaw)
 
     def _floor(self, swing: Swing) -> tuple[float, ...]:
         """Return the lowest the sole may pass along its way: over what stands there."""
@@ -259,12 +294,18 @@ class Walker:
         if self.zmp:
             ahead = self.zmp[self.tick : self.tick + horizon]
             ahead += [self.zmp[-1]] * (horizon - len(ahead))
+            self.still = np.array(ahead[0])
         else:
             # Standing: the ZMP (and so the COM) between the feet where they really are, not
             # wherever the COM happens to be (that let a standing robot drift off its feet).
-            feet = [self._foot(side) for side in ("left", "right")]
-            still = ((feet[0].x + feet[1].x) / 2, (feet[0].y + feet[1].y) / 2)
-            ahead = [still] * horizon
+            # It moves there at STILL_SPEED: a reference that jumped there when a plan ended
+            # (by how far the feet had landed off their footholds) kicked the robot, both feet
+            # slid and on a low-friction floor it fell.
+            left, right = (self._foot(side) for side in ("left", "right"))
+            target = np.array([(left.x + right.x) / 2, (left.y + right.y) / 2])
+            limit = STILL_SPEED * PREVIEW_DT
+            self.still = self.still + np.clip(target - self.still, -limit, limit)
+            ahead = [(float(self.still[0]), float(self.still[1]))] * horizon
         future = np.array(ahead)
         self.com_from = self.com_to
         self.com_to = np.array([self.axes[0].step(future[:, 0]), self.axes[1].step(future[:, 1])])
@@ -276,10 +317,24 @@ class Walker:
                 if swing.touched is not None:
                     self._land(swing, swing.touched)
                 self.feet[swing.side] = swing.end
+        self.shares = self._shares(future[0])
         if self.zmp and self.tick >= len(self.zmp) - 1:
             self._finish()
         else:
             self.tick += 1
+
+    def _shares(self, zmp: np.ndarray) -> dict[str, float]:
+        """Return the share of the body's weight on each foot, from the ZMP reference."""
+        if self.active is not None:
+            stance = "right" if self.active.side == "left" else "left"
+            return {stance: 1.0, self.active.side: 0.0}
+        left = np.array(zmp_point(self.feet["left"], "left"))
+        right = np.array(zmp_point(self.feet["right"], "right"))
+        span = right - left
+        length = float(span @ span)
+        to_right = 0.5 if length < 1e-9 else float((zmp - left) @ span) / length
+        to_right = min(1.0, max(0.0, to_right))
+        return {"left": 1.0 - to_right, "right": to_right}
 
     def _check_touchdown(self, swing: Swing) -> None:
         """Stop lowering the swing foot where it meets something (a block, a bump)."""
@@ -419,27 +474,99 @@ class Walker:
         angles[5] += TILT_GAIN * ankle_tilt[0]
         angles[2] += TILT_GAIN * hip_tilt[1] * 0.5
         angles[1] += TILT_GAIN * hip_tilt[0] * 0.5
-        self.controller.set_slot_positions(self.slots[side], angles)
+        # The body's weight on a stance leg: each joint's PD must hold its share of the load,
+        # and stiff as it is, without this it gives way under it (the stance knee by 0.03 rad,
+        # which leaned the pelvis back and sent every swing foot 4 cm past its foothold).
+        # The load changes slowly: it is worked out at the pattern's 100 Hz (a tenth the CPU).
+        if self.steps % TICK_STEPS == 1 or TICK_STEPS == 1 or side not in self.loads:
+            self.loads[side] = self._load(side, hip, body, angles, foot)
+        self.controller.set_slot_positions(self.slots[side], angles + self.loads[side])
         # Velocity feed-forward: the damping resists only the tracking error, not motion.
         previous = self.last_angles.get(side, angles)
         velocity = (angles - previous) / self.controller.timestep
         self.controller.target_velocity[self.slots[side]] = velocity
         self.last_angles[side] = angles
 
+    def _load(
+        self, side: str, hip: np.ndarray, body: np.ndarray, angles: np.ndarray, foot: Foothold
+    ) -> np.ndarray:
+        """Return the joint offsets that hold this leg's share of the body's weight.
+
+        The ground pushes up under the foot (at its ZMP point) with the share of the weight
+        the ZMP reference puts on it, and the leg's own links hang below each joint; each
+        joint needs the moment of those forces about its axis (statics, J^T F), which its PD
+        gives only after an error of torque / kp.
+        """
+        share = self.shares.get(side, 0.0)
+        hpz, hpx, hpy, kny, aky, _ = angles
+        turn = body @ rotation(0.0, 0.0, hpz)
+        roll = turn @ rotation(hpx, 0.0, 0.0)
+        thigh = roll @ rotation(0.0, hpy, 0.0)
+        knee = hip + thigh @ LINK_DOWN
+        shin = thigh @ rotation(0.0, kny, 0.0)
+        ankle = knee + shin @ LINK_DOWN
+        talus = shin @ rotation(0.0, aky, 0.0)
+        axis = np.array((turn[:, 2], roll[:, 0], thigh[:, 1], shin[:, 1], talus[:, 1], talus[:, 0]))
+        places = np.array((hip, hip, hip, knee, ankle, ankle))
+        cx, cy = zmp_point(foot, side)
+        # Vertical forces (N, up) and where they act: the ground's under the foot, and the
+        # weights of the thigh, shin and foot (each joint feels those below it only).
+        loads = (
+            (share * self.weight, np.array([cx, cy, foot.z]), 6),
+            (-self.leg_weights[0], hip + thigh @ (LINK_DOWN / 2), 3),
+            (-self.leg_weights[1], knee + shin @ (LINK_DOWN / 2), 4),
+            (-self.leg_weights[2], ankle + talus @ FOOT_COM, 6),
+        )
+        torques = np.zeros(6)
+        for force, where, below in loads:
+            lever = where - places[:below]
+            # The moment of a vertical force about each axis (r x F has no z part).
+            torques[:below] -= force * (
+                axis[:below, 0] * lever[:, 1] - axis[:below, 1] * lever[:, 0]
+            )
+        return torques * LOADED / self.kp[side]
+
     def _sole(self, foot: Foothold) -> np.ndarray:
-        """Return the foot's rotation lying flat on the slope under it (a hill's ramp)."""
+        """Return the foot's rotation lying on the slope under it (a hill's ramp)."""
         patch = self.scene.terrain_at(foot.x, foot.y)
         if patch is None or patch.kind != "hill":
             return rotation(0.0, 0.0, foot.yaw)
         c, s, d = math.cos(foot.yaw), math.sin(foot.yaw), SLOPE_SPAN
         height = self.scene.ground_height
-        along = (
-            height(foot.x + c * d, foot.y + s * d) - height(foot.x - c * d, foot.y - s * d)
-        ) / (2 * d)
+        along = self._resting(foot)[0]
         across = (
             height(foot.x - s * d, foot.y + c * d) - height(foot.x + s * d, foot.y - c * d)
         ) / (2 * d)
         return rotation(math.atan(across), -math.atan(along), foot.yaw)
+
+    def _resting(self, foot: Foothold) -> tuple[float, float]:
+        """Return the slope along a sole resting on a hill, and its height at the ankle.
+
+        The sole rests on the ground's upper hull under it, on the stretch under its
+        mid-sole: across a crest it lies on the ramp its load is on and overhangs the other
+        (a sole at the mean slope stood on the crest's edge and spun about it), across the
+        foot of a ramp on heel and toe.
+        """
+        c, s = math.cos(foot.yaw), math.sin(foot.yaw)
+        height = self.scene.ground_height
+        points = [(u, height(foot.x + c * u, foot.y + s * u)) for u in SOLE_SAMPLES]
+        hull: list[tuple[float, float]] = []
+        for point in points:  # the upper hull, left to right
+            while (
+                len(hull) >= 2
+                and (
+                    (hull[-1][0] - hull[-2][0]) * (point[1] - hull[-2][1])
+                    - (hull[-1][1] - hull[-2][1]) * (point[0] - hull[-2][0])
+                )
+                >= 0
+            ):
+                hull.pop()
+            hull.append(point)
+        for (u1, h1), (u2, h2) in itertools.pairwise(hull):
+            if u2 >= ZMP_AHEAD or (u2, h2) == hull[-1]:
+                slope = (h2 - h1) / (u2 - u1)
+                return slope, h1 - slope * u1
+        return 0.0, points[0][1]
 
     def release(self) -> None:
         """Give the legs back: stock gains, no velocity feed-forward."""
