@@ -35,11 +35,11 @@ def test_all_four_checkpoints_in_order_in_configuration_1(make_sim, tmp_path, wo
 
 
 def test_example_controller_over_the_network(server, tmp_path) -> None:
-    # The course shortened (gates 1.5 m apart, the terrain beyond the last): what is tested
+    # The course shortened (gates 1 m apart, the terrain beyond the last): what is tested
     # is the controller over the network, not 19 m of walking (the walker's 0.24 m/s).
     document = shipped_document("vrc_task_2")
     for index, item in enumerate(o for o in document["objects"] if o["model"] == "gate"):
-        item["pose"] = [1.5 * (index + 1), 0.0, 0.0]
+        item["pose"] = [1.0 * (index + 1), 0.0, 0.0]
     for patch in document["terrain"]:
         patch["min"][0] += 20.0
         patch["max"][0] += 20.0
