@@ -73,7 +73,7 @@ def test_ladder_runs_reference_controllers_over_the_network_and_prints_the_table
         "--config",
         "1",
         "--time-limit",
-        "8",
+        "4",
         "--jobs",
         "2",
     )
