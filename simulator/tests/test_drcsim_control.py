@@ -27,17 +27,20 @@ def test_torques_are_clamped_to_effort_and_speed_limits(make_sim) -> None:
     c = sim.controller
     torques = {"l_arm_wrx": 1e6, "r_gripper": -1e6, "r_arm_ely": 1e4}
     assert sim.apply_command(check_command({"op": "joints", "torque": torques}))["ok"]
+    driven = [c.slot[name] for name in torques]
     fastest = np.zeros(len(c.names))
+    steps_over = np.zeros(len(driven), dtype=int)  # consecutive steps past the speed limit
     for _ in range(300):
         sim.step(1)
-        fastest = np.maximum(fastest, np.abs(c.velocity))
+        speed = np.abs(c.velocity)
+        fastest = np.maximum(fastest, speed)
+        steps_over = np.where(speed[driven] > c.max_velocity[driven], steps_over + 1, 0)
+        # Past its limit a driven joint brakes at full effort: under it again the next step.
+        assert np.all(steps_over <= 1), dict(zip(torques, steps_over, strict=True))
         assert np.all(np.abs(c.applied) <= c.max_effort + 1e-9)
-    for name in torques:
-        slot = c.slot[name]
-        assert abs(c.applied[slot]) <= c.max_effort[slot]
-        # Past its limit a joint brakes at full effort: at most one step of overshoot.
-        assert fastest[slot] <= c.max_velocity[slot] * 1.3
-    assert fastest[c.slot["l_arm_wrx"]] > 1.0  # the torque did act
+    # The torques did act: the wrist and the elbow reached their limits.
+    assert fastest[c.slot["l_arm_wrx"]] > c.max_velocity[c.slot["l_arm_wrx"]]
+    assert fastest[c.slot["r_arm_ely"]] > c.max_velocity[c.slot["r_arm_ely"]]
 
 
 def test_a_closed_physics_client_cannot_reach_the_next_ones_world() -> None:
