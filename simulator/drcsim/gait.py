@@ -238,9 +238,13 @@ def timeline(
     p: GaitParameters,
     start: tuple[float, float],
     ground: Callable[[float, float], float],
-    place: Callable[[Foothold], Foothold] | None = None,
+    place: Callable[[dict[str, Foothold], list[tuple[str, Foothold]]], list[Foothold]] | None = None,
 ) -> tuple[list[tuple[float, float]], list[Swing]]:
-    """Return the 100 Hz ZMP reference and the swings that take the feet through `poses`."""
+    """Return the 100 Hz ZMP reference and the swings that take the feet through `poses`.
+
+    `place` may move the planned footholds (given the feet and every step's side and
+    foothold, it returns where each step really goes).
+    """
     ss, ds = round(p.step_time / PREVIEW_DT), round(p.double_support / PREVIEW_DT)
     zmp: list[tuple[float, float]] = []
     swings: list[Swing] = []
@@ -260,11 +264,10 @@ def timeline(
     moves = [(pose, (first_side, other)[i % 2]) for i, pose in enumerate(poses)]
     if poses:
         moves.append((poses[-1], "left" if moves[-1][1] == "right" else "right"))
-    for pose, moving in moves:
+    steps = [(moving, _hold(moving, pose, p.stance_width, ground)) for pose, moving in moves]
+    ends = [end for _, end in steps] if place is None else place(feet, steps)
+    for (moving, _), end in zip(steps, ends, strict=True):
         stance = "right" if moving == "left" else "left"
-        end = _hold(moving, pose, p.stance_width, ground)
-        if place is not None:
-            end = place(end)
         first = len(zmp)
         zmp.extend([zmp_point(feet[stance], stance)] * ss)
         swings.append(Swing(moving, feet[moving], end, first, len(zmp)))

@@ -64,13 +64,23 @@ SWING_FROM_ACTUAL = 0.5  # share of the pelvis's tracking error the swing foot a
 PLAN_STEPS = 30  # steps planned at a time: then both feet down and a fresh plan
 TOUCH_FORCE = 150.0  # N on the descending swing foot that count as its touchdown...
 TOUCH_HEIGHT = 0.015  # m ...when it is this much above the ground it was planned on
-# A foothold on uneven ground moves along its heading by these (m, nearest first) until the
-# sole lies flat: height spread under it within PLACE_FLAT (m), sampled by rays cast down at
-# these offsets from the ankle (m along and across the sole, a margin round it included).
-PLACE_SHIFTS = (0.0, 0.03, -0.03, 0.06, -0.06, 0.09, -0.09, 0.12, -0.12, 0.15, -0.15, 0.18, -0.18)
-PLACE_ALONG = (-0.11, -0.035, 0.04, 0.115, 0.19)
-PLACE_ACROSS = (-0.08, -0.04, 0.0, 0.04, 0.08)
+# A foothold on uneven ground moves to the nearest spot where the sole (and a margin round it)
+# lies flat, on the ground or wholly on one block's top, never across an edge: the height of
+# what stands above the ground's shape is sampled every PLACE_GRID m round the planned spot
+# (rays cast down, in the foot's frame) and the sole slid over it, PLACE_ALONG m either way
+# along its heading and up to PLACE_OUT m outwards, within PLACE_FLAT (m) of height spread.
+PLACE_GRID = 0.025
+PLACE_SOLE = (-0.13, 0.22, 0.08)  # m: heel and toe from the ankle, half-width (margins in)
+PLACE_ALONG = 12  # grid steps either way along the heading (0.3 m)...
+PLACE_OUT = 6  # ...and across: outwards, away from the other foot (0.15 m)...
+PLACE_IN = 2  # ...or inwards (0.05 m), keeping the feet MIN_WIDTH apart
 PLACE_FLAT = 0.01
+PLACE_ON_BLOCK = 0.1  # m of shift a block's top costs over the ground (a block may shift)
+MIN_WIDTH = 0.14  # m between the ankles, at the least (the soles are 0.13 m wide)
+MAX_STRIDE = 0.5  # m a foothold may lie ahead of the other foot (unless planned further)
+PLACE_RHYTHM = 0.5  # cost per m a stride differs from the plan's
+ACROSS_EDGE = 1.0  # cost of a sole across an edge (only where nothing flat is in reach)
+UNREACHABLE = 100.0
 SWING_MARGIN = 0.03  # m the sole passes above what stands on its way
 TOUCH_NEAR = 0.04  # m from its target: nearer, a touch is a landing; further, a scrape
 STILL_SPEED = 0.05  # m/s the standing ZMP reference moves to between the feet
@@ -224,21 +234,82 @@ class Walker:
         self.tick = 0
         self.status = "walking"
 
-    def _place(self, foot: Foothold) -> Foothold:
-        """Move a foothold along its heading until the sole lies flat (not across an edge)."""
+    def _place(
+        self, feet: dict[str, Foothold], steps: list[tuple[str, Foothold]]
+    ) -> list[Foothold]:
+        """Return where each planned step goes: the sole flat (not across an edge), near plan.
+
+        Each step may move to spots round its planned foothold where the sole lies flat; the
+        cheapest sequence (least moved, strides within reach) is chosen by dynamic
+        programming over the whole plan.
+        """
+        previous = [(0.0, feet["right" if steps[0][0] == "left" else "left"])] if steps else []
+        prev_cost = np.zeros(1)
+        back: list[np.ndarray] = []
+        choices: list[list[Foothold]] = []
+        planned_prev = previous[0][1] if previous else None
+        for side, foot in steps:
+            options = self._candidates(foot, side)
+            holds = [hold for _, hold in options]
+            cost = np.array([c for c, _ in options])
+            c, s = math.cos(foot.yaw), math.sin(foot.yaw)
+            assert planned_prev is not None
+            planned = c * (foot.x - planned_prev.x) + s * (foot.y - planned_prev.y)
+            px = np.array([h.x for h in choices[-1]]) if choices else np.array([previous[0][1].x])
+            py = np.array([h.y for h in choices[-1]]) if choices else np.array([previous[0][1].y])
+            hx, hy = np.array([h.x for h in holds]), np.array([h.y for h in holds])
+            ahead = c * (hx[None, :] - px[:, None]) + s * (hy[None, :] - py[:, None])
+            sign = 1.0 if side == "left" else -1.0
+            width = sign * (c * (hy[None, :] - py[:, None]) - s * (hx[None, :] - px[:, None]))
+            reach = (ahead >= min(-0.05, planned)) & (ahead <= max(MAX_STRIDE, planned))
+            reach &= width >= MIN_WIDTH
+            total = prev_cost[:, None] + cost[None, :] + PLACE_RHYTHM * np.abs(ahead - planned)
+            total = np.where(reach, total, total + UNREACHABLE)
+            back.append(np.argmin(total, axis=0))
+            prev_cost = total[back[-1], np.arange(len(holds))]
+            choices.append(holds)
+            planned_prev = foot
+        if not steps:
+            return []
+        pick = int(np.argmin(prev_cost))
+        chosen = []
+        for holds, links in zip(reversed(choices), reversed(back), strict=True):
+            chosen.append(holds[pick])
+            pick = int(links[pick])
+        return chosen[::-1]
+
+    def _candidates(self, foot: Foothold, side: str) -> list[tuple[float, Foothold]]:
+        """Return (cost, foothold) for spots round a planned one: flat ones cheap, else dear."""
         c, s = math.cos(foot.yaw), math.sin(foot.yaw)
-        best: tuple[float, Foothold] | None = None
-        for shift in PLACE_SHIFTS:
-            x, y = foot.x + c * shift, foot.y + s * shift
-            heights = self._heights(x, y, c, s)
-            spread = max(heights) - min(heights)
-            z = self.scene.ground_height(x, y) + max(heights)
-            if spread <= PLACE_FLAT:
-                return self._on_hill(Foothold(x, y, z, foot.yaw))
-            if best is None or spread < best[0]:
-                best = (spread, Foothold(x, y, z, foot.yaw))
-        found = foot if best is None else best[1]
-        return self._on_hill(found)
+        grid = PLACE_GRID
+        heel, toe, half = PLACE_SOLE
+        rows = round((toe - heel) / grid) + 1  # samples along the sole...
+        cols = 2 * round(half / grid) + 1  # ...and across it
+        along = heel - PLACE_ALONG * grid + grid * np.arange(rows + 2 * PLACE_ALONG)
+        across = grid * np.arange(-(cols // 2) - PLACE_OUT, cols // 2 + PLACE_OUT + 1)
+        if side == "right":
+            across = -across  # outwards first, whichever the side
+        heights = np.array(self._heights_at(foot.x, foot.y, c, s, along, across))
+        heights = heights.reshape(len(along), len(across))
+        if not heights.any():  # nothing but the ground's own shape: as planned
+            return [(0.0, self._on_hill(foot))]
+        options = []
+        for k in range(2 * PLACE_ALONG + 1):
+            shift = (k - PLACE_ALONG) * grid
+            for out in range(-PLACE_IN, PLACE_OUT + 1):
+                middle = len(across) // 2 + out
+                window = heights[k : k + rows, middle - cols // 2 : middle + cols // 2 + 1]
+                top, spread = float(window.max()), float(window.max() - window.min())
+                side_shift = float(across[middle] - across[len(across) // 2])
+                x, y = foot.x + c * shift - s * side_shift, foot.y + s * shift + c * side_shift
+                here = Foothold(x, y, self.scene.ground_height(x, y) + top, foot.yaw)
+                cost = abs(shift) + 2 * abs(out) * grid
+                if top > PLACE_FLAT:
+                    cost += PLACE_ON_BLOCK
+                if spread > PLACE_FLAT:
+                    cost += ACROSS_EDGE + 10 * spread
+                options.append((cost, here))
+        return options
 
     def _on_hill(self, foot: Foothold) -> Foothold:
         """Return the foothold at the height of its sole resting on a hill, if on one."""
@@ -263,10 +334,17 @@ class Walker:
 
     def _heights(self, x: float, y: float, c: float, s: float) -> list[float]:
         """Return what stands above the ground's shape over a sole and a margin round it."""
+        heel, toe, half = PLACE_SOLE
+        return self._heights_at(x, y, c, s, np.linspace(heel, toe, 5), np.linspace(-half, half, 5))
+
+    def _heights_at(
+        self, x: float, y: float, c: float, s: float, along: np.ndarray, across: np.ndarray
+    ) -> list[float]:
+        """Return what stands above the ground's shape at a grid (in a foot's frame) round x, y."""
         starts, ends = [], []
-        for along in PLACE_ALONG:
-            for across in PLACE_ACROSS:
-                px, py = x + c * along - s * across, y + s * along + c * across
+        for a in along:
+            for b in across:
+                px, py = x + c * a - s * b, y + s * a + c * b
                 starts.append((px, py, 0.5))
                 ends.append((px, py, -0.05))
         heights = []
