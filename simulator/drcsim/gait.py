@@ -97,6 +97,10 @@ class Foothold:
     yaw: float
 
 
+# Moves a plan's footholds: given the feet and every step's side and foothold, where each goes.
+Placer = Callable[[dict[str, Foothold], list[tuple[str, Foothold]]], list[Foothold]]
+
+
 def wrap_angle(angle: float) -> float:
     """Return `angle` wrapped into [-pi, pi)."""
     return (angle + math.pi) % (2 * math.pi) - math.pi
@@ -238,7 +242,7 @@ def timeline(
     p: GaitParameters,
     start: tuple[float, float],
     ground: Callable[[float, float], float],
-    place: Callable[[dict[str, Foothold], list[tuple[str, Foothold]]], list[Foothold]] | None = None,
+    place: Placer | None = None,
 ) -> tuple[list[tuple[float, float]], list[Swing]]:
     """Return the 100 Hz ZMP reference and the swings that take the feet through `poses`.
 
