@@ -302,7 +302,7 @@ class Walker:
                 top, spread = float(window.max()), float(window.max() - window.min())
                 side_shift = float(across[middle] - across[len(across) // 2])
                 x, y = foot.x + c * shift - s * side_shift, foot.y + s * shift + c * side_shift
-                here = Foothold(x, y, self.scene.ground_height(x, y) + top, foot.yaw)
+                here = self._on_hill(Foothold(x, y, self.scene.ground_height(x, y) + top, foot.yaw))
                 cost = abs(shift) + 2 * abs(out) * grid
                 if top > PLACE_FLAT:
                     cost += PLACE_ON_BLOCK
