@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from array import array
 from collections.abc import Callable
 from typing import Any
 
@@ -62,6 +63,28 @@ SEAT_BEHIND, SEAT_LEFT = 0.15, 0.3
 CARRY_LOW = 0.2
 
 
+# The lidar (README, Sensors): from this point in the head frame, its scan plane the head's x-y
+# plane rolled about the head's x axis by the spindle angle.
+LIDAR_IN_HEAD = (0.16, 0.0, 0.12)
+# Lidar returns this high over the ground (m) are the gates' posts: the vehicle is lower (its
+# cage about 1.5 m), the robot's own body is nearer than POST_NEAREST and the ground far below.
+POST_BAND = (1.6, 2.3)
+POST_NEAREST = 0.8
+# How far apart (m) two returns may be and still be on the same post (0.15 m across).
+POST_CLUSTER = 0.3
+# Returns on one post for it to count, and how near (m) a post must fall to where the
+# briefing's gate puts it once the estimate is corrected (gates are off by up to 0.25 m).
+POST_MIN_RETURNS = 4
+POST_MATCH = 0.45
+# Looking round for the posts: half a turn of the lidar's spindle (0.5 rad/s) brings every
+# scan plane by once.
+LOOK_S = 6.5
+# Out of the vehicle, how far (m) to walk on along its side before turning to the finish: the
+# vehicle's front is about 1.4 m ahead of the driver door (its middle 0.15 m ahead of the
+# seat, 2.4 m long with the wheels' reach).
+FRONT_CLEAR = 2.3
+
+
 class Down(ClientError):
     """The robot fell and the controller does not get it up: it gives up the run."""
 
@@ -70,6 +93,132 @@ def vehicle_middle(px: float, py: float, yaw: float) -> tuple[float, float]:
     """The vehicle's middle from the seated pelvis (SEAT_BEHIND behind it, SEAT_LEFT left)."""
     c, s = math.cos(yaw), math.sin(yaw)
     return px + SEAT_BEHIND * c + SEAT_LEFT * s, py + SEAT_BEHIND * s - SEAT_LEFT * c
+
+
+def _rotation(q: list[float]) -> tuple[tuple[float, float, float], ...]:
+    """The rotation matrix (rows) of a quaternion [x, y, z, w]."""
+    x, y, z, w = q
+    return (
+        (1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)),
+        (2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)),
+        (2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)),
+    )
+
+
+def _apply(
+    rotation: tuple[tuple[float, float, float], ...], p: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    r0, r1, r2 = rotation
+    return (
+        r0[0] * p[0] + r0[1] * p[1] + r0[2] * p[2],
+        r1[0] * p[0] + r1[1] * p[1] + r1[2] * p[2],
+        r2[0] * p[0] + r2[1] * p[1] + r2[2] * p[2],
+    )
+
+
+def post_returns(scan: dict[str, Any], pelvis: dict[str, Any]) -> list[tuple[float, float]]:
+    """Where (x, y) a lidar scan met something in POST_BAND, by the pelvis estimate `pelvis`.
+
+    Each return goes from the lidar (README: LIDAR_IN_HEAD in the head frame, the scan plane
+    rolled about the head's x axis by `spindle`) through `head_in_pelvis` and the estimated
+    pelvis pose to the world: off from the truth by whatever the estimate is off.
+    """
+    ranges = array("f", scan["ranges"])
+    head = scan["head_in_pelvis"]
+    head_r, head_t = _rotation(head["orientation"]), head["position"]
+    pelvis_r, pelvis_t = _rotation(pelvis["orientation"]), pelvis["position"]
+    count = len(ranges)
+    a0, a1 = scan["angle_min"], scan["angle_max"]
+    cos_s, sin_s = math.cos(scan["spindle"]), math.sin(scan["spindle"])
+    far = scan["range_max"] - 0.05
+    found = []
+    for i, r in enumerate(ranges):
+        if r < POST_NEAREST or r > far:
+            continue
+        a = a0 + (a1 - a0) * i / (count - 1)
+        ca, sa = math.cos(a), math.sin(a)
+        in_head = (
+            LIDAR_IN_HEAD[0] + r * ca,
+            LIDAR_IN_HEAD[1] + r * sa * cos_s,
+            LIDAR_IN_HEAD[2] + r * sa * sin_s,
+        )
+        in_pelvis = _apply(head_r, in_head)
+        in_pelvis = (in_pelvis[0] + head_t[0], in_pelvis[1] + head_t[1], in_pelvis[2] + head_t[2])
+        x, y, z = _apply(pelvis_r, in_pelvis)
+        if POST_BAND[0] <= z + pelvis_t[2] <= POST_BAND[1]:
+            found.append((x + pelvis_t[0], y + pelvis_t[1]))
+    return found
+
+
+def clusters(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """The middles of the groups of points within POST_CLUSTER of each other (the posts)."""
+    groups: list[list[tuple[float, float]]] = []
+    for p in sorted(points):
+        for group in groups:
+            if any(math.dist(p, q) <= POST_CLUSTER for q in group[-20:]):
+                group.append(p)
+                break
+        else:
+            groups.append([p])
+    return [
+        (sum(p[0] for p in g) / len(g), sum(p[1] for p in g) / len(g))
+        for g in groups
+        if len(g) >= POST_MIN_RETURNS
+    ]
+
+
+def gate_posts(gates: dict[str, Any]) -> list[tuple[float, float]]:
+    """Where the briefing puts each gate's two posts (either side of its opening)."""
+    posts = []
+    for gate in gates.values():
+        gx, gy, gyaw = gate["pose"]
+        half = gate["width"] / 2 + 0.075
+        posts += [(gx - half * math.sin(gyaw), gy + half * math.cos(gyaw))]
+        posts += [(gx + half * math.sin(gyaw), gy - half * math.cos(gyaw))]
+    return posts
+
+
+def post_correction(
+    seen: list[tuple[float, float]], posts: list[tuple[float, float]]
+) -> tuple[float, float] | None:
+    """The shift that puts the posts seen (by the estimate) where the briefing has them.
+
+    Every pairing of a post seen with a post of the briefing proposes a shift; the one most
+    other pairings agree with (within POST_MATCH) wins, the smaller shift on a tie; the
+    answer is the mean of the agreeing shifts. None when nothing is seen, or when no shift
+    is backed by two posts (one post alone cannot say which it is).
+    """
+    shifts = [((p[0] - s[0], p[1] - s[1]), i) for i, s in enumerate(seen) for p in posts]
+    best: list[tuple[float, float]] = []
+    best_key: tuple[int, float] | None = None
+    for shift, _ in shifts:
+        agree = [(t, i) for t, i in shifts if math.dist(t, shift) <= POST_MATCH]
+        key = (-len({i for _, i in agree}), math.hypot(*shift))
+        if best_key is None or key < best_key:
+            best, best_key = [t for t, _ in agree], key
+    if best_key is None or -best_key[0] < 2:
+        return None
+    return sum(t[0] for t in best) / len(best), sum(t[1] for t in best) / len(best)
+
+
+def finish_legs(
+    x: float, y: float, yaw: float, gate: tuple[float, float, float]
+) -> list[tuple[float, float, float]]:
+    """The legs from beside the driver door (at x, y facing yaw) to just before the gate.
+
+    The vehicle is on the right, its front about 1.4 m ahead: first straight on along its
+    side until FRONT_CLEAR ahead (clear of the front), if that leaves room before the gate
+    line; then across to the gate's middle line, up to 1 m before the gate and never back
+    round the vehicle's front corner (a diagonal from beside the door met it there).
+    """
+    gx, gy, gyaw = gate
+    c, s = math.cos(gyaw), math.sin(gyaw)
+    before = (gx - x) * c + (gy - y) * s  # how far before the gate line the robot is
+    if before < FRONT_CLEAR + 0.5:
+        return [(gx - c, gy - s, gyaw)]
+    wx, wy = x + FRONT_CLEAR * math.cos(yaw), y + FRONT_CLEAR * math.sin(yaw)
+    short = max(0.5, min(1.0, (gx - wx) * c + (gy - wy) * s))
+    return [(wx, wy, yaw), (gx - short * c, gy - short * s, gyaw)]
 
 
 def _yaw(orientation: list[float]) -> float:
@@ -93,6 +242,7 @@ class ExampleController:
     straight = False  # True: straight at every goal (also the door), no backing-away legs
     avoid: tuple[str, ...] = ()  # kinds of terrain (the briefing's) walked round in task 2
     gait: dict[str, float] = {}  # the walker's defaults
+    relocate = False  # True: out of the vehicle, correct the estimate by the gates' posts
 
     def __init__(
         self,
@@ -106,6 +256,7 @@ class ExampleController:
         self.lockstep = bool(self.info["lockstep"])
         self.deadline = time.monotonic() + timeout_s
         self.final_score: dict[str, Any] | None = None
+        self.scans: list[dict[str, Any]] = []  # lidar scans received while looking
         self.gave_up: str | None = None
         if not self.lockstep and isinstance(client, SimClient):
             client.subscribe("clock", "score")
@@ -126,6 +277,8 @@ class ExampleController:
             if received is None:
                 continue
             topic, message = received
+            if topic == "lidar":
+                self.scans.append(message)
             if topic == "clock" and message["t"] >= target:
                 return self.client.state()
             if topic == "score" and message["event"] == "run_end":
@@ -195,6 +348,38 @@ class ExampleController:
                 px + (x - px) * leg / legs, py + (y - py) * leg / legs, yaw, **SHUFFLE_GAIT
             )
         return state
+
+    def look_for_posts(self, gates: dict[str, Any]) -> tuple[float, float]:
+        """Stand still and look round with the lidar; return the estimate's correction.
+
+        The estimate's position drifts (its yaw drifts, and odometry turns by it): after a
+        drive it may be 2 m off. The gates' posts stand where the briefing says, to 0.25 m:
+        the shift that brings the posts the lidar sees onto the briefing's corrects it
+        (nothing when the client has no topics or no two posts agree).
+        """
+        subscribe = getattr(self.client, "subscribe", None)
+        receive = getattr(self.client, "receive", None)
+        if subscribe is None or receive is None:
+            self.log("no lidar on this client: walking on the estimate")
+            return 0.0, 0.0
+        subscribe("lidar")
+        self.scans = []
+        returns: list[tuple[float, float]] = []
+        state = self.client.state()
+        end = state["t"] + LOOK_S
+        while state["t"] < end and not state["score"]["ended"]:
+            state = self.advance(0.25)
+            while self.lockstep and (received := receive(0.05)) is not None:
+                if received[0] == "lidar":
+                    self.scans.append(received[1])
+            for scan in self.scans:
+                returns += post_returns(scan, state["pelvis"])
+            self.scans = []
+        getattr(self.client, "unsubscribe", lambda *_: None)("lidar")
+        seen = clusters(returns)
+        shift = post_correction(seen, gate_posts(gates))
+        self.log(f"posts seen at {[(round(x, 2), round(y, 2)) for x, y in seen]}: shift {shift}")
+        return shift or (0.0, 0.0)
 
     def reach(
         self, hand: str, target: list[float], limit_s: float = 4.0, **params: Any
@@ -279,12 +464,21 @@ class ExampleController:
         if not self.straight:
             # Out along the vehicle's side, past its front (braking by foot, it may have come
             # to rest close to the finish), then square in front of the finish gate.
-            ex, ey = state["pelvis"]["position"][:2]
+            if self.relocate:  # where it truly is, by the gates' posts
+                dx, dy = self.look_for_posts(course["gates"])
+                state = self.client.state()
+            else:
+                dx, dy = 0.0, 0.0
+            ex, ey = state["pelvis"]["position"][0] + dx, state["pelvis"]["position"][1] + dy
             yaw = _yaw(state["pelvis"]["orientation"])
-            ahead = (gx - 1.0 * c - ex) * math.cos(yaw) + (gy - 1.0 * s - ey) * math.sin(yaw)
-            if ahead > 2.5:
-                self.walk(ex + 2.0 * math.cos(yaw), ey + 2.0 * math.sin(yaw), yaw)
-            self.walk(gx - 1.0 * c, gy - 1.0 * s, gyaw)
+            if self.relocate:
+                for leg in finish_legs(ex, ey, yaw, (gx, gy, gyaw)):
+                    self.walk(*leg)
+            else:
+                ahead = (gx - 1.0 * c - ex) * math.cos(yaw) + (gy - 1.0 * s - ey) * math.sin(yaw)
+                if ahead > 2.5:
+                    self.walk(ex + 2.0 * math.cos(yaw), ey + 2.0 * math.sin(yaw), yaw)
+                self.walk(gx - 1.0 * c, gy - 1.0 * s, gyaw)
         past = self.walk_past
         self.walk(gx + past * c, gy + past * s, gyaw)
 

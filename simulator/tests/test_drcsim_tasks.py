@@ -9,7 +9,12 @@ import sys
 
 import pytest
 from drcsim.controllers import CarefulController
-from drcsim.example_controller import ExampleController, vehicle_middle
+from drcsim.example_controller import (
+    ExampleController,
+    gate_posts,
+    post_correction,
+    vehicle_middle,
+)
 from drcsim.local import LocalClient
 from drcsim.models import vehicle
 from drcsim.worlds import shipped_document
@@ -109,3 +114,50 @@ def test_the_controllers_steer_the_vehicle_by_its_middle_not_by_the_driver() -> 
         c, s = math.cos(yaw), math.sin(yaw)
         pelvis = (car_x + seat_x * c - seat_y * s, car_y + seat_x * s + seat_y * c)
         assert vehicle_middle(*pelvis, yaw) == pytest.approx((car_x, car_y), abs=1e-9)
+
+
+class _Sensing(LocalClient):
+    """A LocalClient with topics, as SimClient has them: what the run publishes, queued."""
+
+    def __init__(self, sim) -> None:
+        super().__init__(sim)
+        self.queue: list[tuple[str, dict]] = []
+        sim.options.publish = lambda topic, message: self.queue.append((topic, message))
+
+    def subscribe(self, *topics: str) -> None:
+        self.sim.active_topics |= set(topics)
+
+    def unsubscribe(self, *topics: str) -> None:
+        self.sim.active_topics -= set(topics)
+
+    def receive(self, timeout_s: float = 1.0) -> tuple[str, dict] | None:
+        return self.queue.pop(0) if self.queue else None
+
+
+def test_the_gates_posts_correct_the_estimate_by_the_briefing() -> None:
+    gates = {
+        "gate_2": {"pose": [40.0, 4.4, 0.0], "width": 5.0},
+        "gate_3": {"pose": [48.0, 6.0, 0.0], "width": 3.0},
+    }
+    posts = gate_posts(gates)
+    assert [c for post in posts[2:] for c in post] == pytest.approx([48.0, 7.575, 48.0, 4.425])
+    # Both of gate_3's posts seen 1.9 m off (the estimate's drift): that shift, not one that
+    # puts one seen post on the other gate's, or on the other post of the same gate.
+    seen = [(46.5, 5.7), (46.5, 2.55)]
+    assert post_correction(seen, posts) == pytest.approx((1.5, 1.875))
+    assert post_correction(seen[:1], posts) is None  # one post alone: which is it?
+    assert post_correction([], posts) is None
+
+
+def test_out_of_the_vehicle_the_careful_controller_finds_itself_by_the_posts(make_sim, place):
+    # Task 1 configuration 2, where careful's drive ends 4 m short of the finish gate with its
+    # estimate ~2 m off: the lidar's returns of the gates' posts put it back within the
+    # briefing's error (0.25 m).
+    sim = make_sim("vrc_task_1", "2")
+    place(sim, 44.7, 7.55, 0.0)
+    sim.estimator.position[:2] -= (1.5, 1.9)
+    controller = CarefulController(_Sensing(sim))
+    dx, dy = controller.look_for_posts(controller.info["course"]["gates"])
+    estimate = controller.client.state()["pelvis"]["position"]
+    true = sim.client.getBasePositionAndOrientation(sim.scene.robot)[0]
+    assert math.dist((estimate[0] + dx, estimate[1] + dy), true[:2]) < 0.35
