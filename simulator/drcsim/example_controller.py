@@ -83,6 +83,9 @@ LOOK_S = 6.5
 # vehicle's front is about 1.4 m ahead of the driver door (its middle 0.15 m ahead of the
 # seat, 2.4 m long with the wheels' reach).
 FRONT_CLEAR = 2.3
+# ...and how much further out from its side (m): the door leaves 0.7 m, and walking along at
+# that, still 0.3 m off the estimate's line, it fell beside the front wheel.
+SIDE_GAP = 0.5
 
 
 class Down(ClientError):
@@ -206,8 +209,8 @@ def finish_legs(
 ) -> list[tuple[float, float, float]]:
     """The legs from beside the driver door (at x, y facing yaw) to just before the gate.
 
-    The vehicle is on the right, its front about 1.4 m ahead: first straight on along its
-    side until FRONT_CLEAR ahead (clear of the front), if that leaves room before the gate
+    The vehicle is on the right, its front about 1.4 m ahead: first on along its side until
+    FRONT_CLEAR ahead (clear of the front) and SIDE_GAP out, if that leaves room before the gate
     line; then across to the gate's middle line, up to 1 m before the gate and never back
     round the vehicle's front corner (a diagonal from beside the door met it there).
     """
@@ -216,7 +219,9 @@ def finish_legs(
     before = (gx - x) * c + (gy - y) * s  # how far before the gate line the robot is
     if before < FRONT_CLEAR + 0.5:
         return [(gx - c, gy - s, gyaw)]
-    wx, wy = x + FRONT_CLEAR * math.cos(yaw), y + FRONT_CLEAR * math.sin(yaw)
+    # ...and out to the left as it goes, SIDE_GAP further from the vehicle's side.
+    wx = x + FRONT_CLEAR * math.cos(yaw) - SIDE_GAP * math.sin(yaw)
+    wy = y + FRONT_CLEAR * math.sin(yaw) + SIDE_GAP * math.cos(yaw)
     short = max(0.5, min(1.0, (gx - wx) * c + (gy - wy) * s))
     return [(wx, wy, yaw), (gx - short * c, gy - short * s, gyaw)]
 

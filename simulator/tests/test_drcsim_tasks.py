@@ -11,6 +11,7 @@ import pytest
 from drcsim.controllers import CarefulController
 from drcsim.example_controller import (
     ExampleController,
+    finish_legs,
     gate_posts,
     post_correction,
     vehicle_middle,
@@ -147,6 +148,18 @@ def test_the_gates_posts_correct_the_estimate_by_the_briefing() -> None:
     assert post_correction(seen, posts) == pytest.approx((1.5, 1.875))
     assert post_correction(seen[:1], posts) is None  # one post alone: which is it?
     assert post_correction([], posts) is None
+
+
+def test_out_of_the_vehicle_it_walks_clear_of_the_vehicles_front_before_turning() -> None:
+    # Task 1 configuration 2: out 3.3 m before the finish gate's line and 1.6 m left of its
+    # middle, the vehicle on the right. On 2.3 m and 0.5 m out first, then across to the middle line
+    # without stepping back towards the vehicle's front (a diagonal from the door met it).
+    legs = finish_legs(44.7, 7.55, 0.0, (48.0, 6.0, 0.0))
+    assert [c for leg in legs for c in leg] == pytest.approx([47.0, 8.05, 0.0, 47.0, 6.0, 0.0])
+    far = finish_legs(30.0, 7.55, 0.0, (48.0, 6.0, 0.0))  # far off: square 1 m before it
+    assert far[-1] == pytest.approx((47.0, 6.0, 0.0)) and far[0][0] == pytest.approx(32.3)
+    # Out near (or past) the gate line: no room to go on, straight to 1 m before it.
+    assert finish_legs(46.0, 7.55, 0.0, (48.0, 6.0, 0.0)) == [(47.0, 6.0, 0.0)]
 
 
 def test_out_of_the_vehicle_the_careful_controller_finds_itself_by_the_posts(make_sim, place):
