@@ -34,7 +34,6 @@ class CarefulController(ExampleController):
     walk_tries = 3
     approach_tries = 3
     avoid = ("rubble",)
-    relocate = True
     # Slower and shorter than the walker's defaults (0.25 m, 0.6 s, 0.3 s).
     gait = {"step_length": 0.2, "step_time": 0.8, "double_support": 0.5}
     search = SEARCH + [

@@ -247,7 +247,6 @@ class ExampleController:
     straight = False  # True: straight at every goal (also the door), no backing-away legs
     avoid: tuple[str, ...] = ()  # kinds of terrain (the briefing's) walked round in task 2
     gait: dict[str, float] = {}  # the walker's defaults
-    relocate = False  # True: out of the vehicle, correct the estimate by the gates' posts
 
     def __init__(
         self,
@@ -467,23 +466,14 @@ class ExampleController:
         gx, gy, gyaw = course["gates"]["gate_3"]["pose"]
         c, s = math.cos(gyaw), math.sin(gyaw)
         if not self.straight:
-            # Out along the vehicle's side, past its front (braking by foot, it may have come
-            # to rest close to the finish), then square in front of the finish gate.
-            if self.relocate:  # where it truly is, by the gates' posts
-                dx, dy = self.look_for_posts(course["gates"])
-                state = self.client.state()
-            else:
-                dx, dy = 0.0, 0.0
+            # Where it truly is, by the gates' posts (the estimate is ~2 m off after a drive);
+            # then out along the vehicle's side, past its front (braking by foot, it may have
+            # come to rest close to the finish), and square in front of the finish gate.
+            dx, dy = self.look_for_posts(course["gates"])
+            state = self.client.state()
             ex, ey = state["pelvis"]["position"][0] + dx, state["pelvis"]["position"][1] + dy
-            yaw = _yaw(state["pelvis"]["orientation"])
-            if self.relocate:
-                for leg in finish_legs(ex, ey, yaw, (gx, gy, gyaw)):
-                    self.walk(*leg)
-            else:
-                ahead = (gx - 1.0 * c - ex) * math.cos(yaw) + (gy - 1.0 * s - ey) * math.sin(yaw)
-                if ahead > 2.5:
-                    self.walk(ex + 2.0 * math.cos(yaw), ey + 2.0 * math.sin(yaw), yaw)
-                self.walk(gx - 1.0 * c, gy - 1.0 * s, gyaw)
+            for leg in finish_legs(ex, ey, _yaw(state["pelvis"]["orientation"]), (gx, gy, gyaw)):
+                self.walk(*leg)
         past = self.walk_past
         self.walk(gx + past * c, gy + past * s, gyaw)
 
