@@ -210,18 +210,22 @@ def finish_legs(
     """The legs from beside the driver door (at x, y facing yaw) to just before the gate.
 
     The vehicle is on the right, its front about 1.4 m ahead: first on along its side until
-    FRONT_CLEAR ahead (clear of the front) and SIDE_GAP out, if that leaves room before the gate
-    line; then across to the gate's middle line, up to 1 m before the gate and never back
-    round the vehicle's front corner (a diagonal from beside the door met it there).
+    FRONT_CLEAR ahead (clear of the front) and SIDE_GAP out, if that leaves 0.5 m before the
+    gate line (else on to 0.5 m before it, not out towards a post); then across to the gate's
+    middle line, up to 1 m before the gate and never back round the vehicle's front corner (a
+    diagonal from beside the door met it there). Out less than FRONT_CLEAR before the gate
+    line (the vehicle's front at it or through), straight to 1 m before the gate.
     """
     gx, gy, gyaw = gate
     c, s = math.cos(gyaw), math.sin(gyaw)
     before = (gx - x) * c + (gy - y) * s  # how far before the gate line the robot is
-    if before < FRONT_CLEAR + 0.5:
+    if before < FRONT_CLEAR:  # the vehicle's front at the gate line, or past it
         return [(gx - c, gy - s, gyaw)]
-    # ...and out to the left as it goes, SIDE_GAP further from the vehicle's side.
-    wx = x + FRONT_CLEAR * math.cos(yaw) - SIDE_GAP * math.sin(yaw)
-    wy = y + FRONT_CLEAR * math.sin(yaw) + SIDE_GAP * math.cos(yaw)
+    # ...and out to the left as it goes, SIDE_GAP further from the vehicle's side, when there
+    # is room; else on only to 0.5 m before the gate line and not out (towards a post).
+    on, out = (FRONT_CLEAR, SIDE_GAP) if before >= FRONT_CLEAR + 0.5 else (before - 0.5, 0.0)
+    wx = x + on * math.cos(yaw) - out * math.sin(yaw)
+    wy = y + on * math.sin(yaw) + out * math.cos(yaw)
     short = max(0.5, min(1.0, (gx - wx) * c + (gy - wy) * s))
     return [(wx, wy, yaw), (gx - short * c, gy - short * s, gyaw)]
 

@@ -162,6 +162,10 @@ def test_out_of_the_vehicle_it_walks_clear_of_the_vehicles_front_before_turning(
     assert [c for leg in legs for c in leg] == pytest.approx([47.0, 8.05, 0.0, 47.0, 6.0, 0.0])
     far = finish_legs(30.0, 7.55, 0.0, (48.0, 6.0, 0.0))  # far off: square 1 m before it
     assert far[-1] == pytest.approx((47.0, 6.0, 0.0)) and far[0][0] == pytest.approx(32.3)
+    # Out 2.6 m before it (example's vehicle stopped there): on to 0.5 m before it, not out
+    # towards the post, then across (the diagonal met the vehicle's front corner).
+    legs = finish_legs(45.4, 6.9, 0.0, (48.0, 6.0, 0.0))
+    assert [c for leg in legs for c in leg] == pytest.approx([47.5, 6.9, 0.0, 47.5, 6.0, 0.0])
     # Out near (or past) the gate line: no room to go on, straight to 1 m before it.
     assert finish_legs(46.0, 7.55, 0.0, (48.0, 6.0, 0.0)) == [(47.0, 6.0, 0.0)]
 
