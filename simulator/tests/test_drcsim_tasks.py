@@ -9,15 +9,10 @@ import sys
 
 import pytest
 from drcsim.controllers import CarefulController
-from drcsim.example_controller import (
-    ExampleController,
-    finish_legs,
-    gate_posts,
-    post_correction,
-    vehicle_middle,
-)
+from drcsim.example_controller import ExampleController, finish_legs, vehicle_middle
 from drcsim.local import LocalClient
 from drcsim.models import vehicle
+from drcsim.posts import gate_posts, post_correction
 from drcsim.worlds import shipped_document
 
 
