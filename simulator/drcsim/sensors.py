@@ -18,6 +18,8 @@ SENSOR_TOPICS = ("joint_states", "imu", "lidar", "camera", "contact")
 # stereo pair and ahead of the head's face, as the MultiSense SL carries its spinning Hokuyo;
 # 8 cm ahead of the face, so beams starting 0.1 m out, up to 135° off forward, start outside it.
 LIDAR_IN_HEAD = np.array([0.16, 0.0, 0.12])
+LEFT_EYE_IN_HEAD = np.array([0.14, 0.035, 0.08])  # the stereo pair's left camera
+STEREO_BASELINE = 0.07  # m: the right camera is this far right of the left one
 NOISE_TABLE_SIZE = 1 << 16  # camera noise: one uint16 draw per channel indexes this table
 # The ground plane's 1 m checker squares as TinyRenderer draws them (its default texture under
 # its default light): the square whose corner (floor x, floor y) has an even sum, then an odd.
@@ -298,7 +300,7 @@ class Sensors:
     def _camera(self, rng: np.random.Generator, _: float) -> dict[str, Any]:
         s = self.settings
         origin, rotation = self._head_pose()
-        left = origin + rotation @ np.array([0.14, 0.035, 0.08])
+        left = origin + rotation @ LEFT_EYE_IN_HEAD
         message: dict[str, Any] = {
             "width": s.camera_width,
             "height": s.camera_height,
@@ -307,7 +309,7 @@ class Sensors:
             "head_in_pelvis": self._head_in_pelvis(),
         }
         if s.camera_stereo:
-            right = left - rotation[:, 1] * 0.07
+            right = left - rotation[:, 1] * STEREO_BASELINE
             message["right"] = self._render(right, rotation, rng)
         return message
 

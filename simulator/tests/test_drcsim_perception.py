@@ -8,7 +8,7 @@ import numpy as np
 from drcsim._bullet import pybullet
 from drcsim.local import LocalClient
 from drcsim.protocol import check_command, encode
-from drcsim.sensors import SensorSettings, whole_level_noise
+from drcsim.sensors import LEFT_EYE_IN_HEAD, SensorSettings, whole_level_noise
 
 
 def test_state_is_an_estimate_from_noisy_sensors_not_ground_truth(make_sim) -> None:
@@ -129,7 +129,7 @@ def test_the_camera_draws_the_ground_as_tinyrenderer_did(make_sim) -> None:
     sim = make_sim("vrc_task_2", "1", sensors=settings)  # gates, mud pit, rubble, hill ahead
     client, ground, sensors = sim.client, sim.scene.ground, sim.sensors
     head, rotation = sensors._head_pose()
-    eye = head + rotation @ np.array([0.14, 0.035, 0.08])
+    eye = head + rotation @ LEFT_EYE_IN_HEAD
     rgba = client.getVisualShapeData(ground)[0][7]
     drawn = np.frombuffer(sensors._render(eye, rotation, np.random.default_rng(0)), np.uint8)
     assert client.getVisualShapeData(ground)[0][7] == rgba  # the plane's own look is kept
