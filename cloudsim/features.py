@@ -8,10 +8,12 @@ command line exists before, and often without, an app).
 from __future__ import annotations
 
 from importlib import import_module
-from typing import Protocol, cast
+from typing import TYPE_CHECKING, Protocol, cast
 
-import click
-from flask import Flask
+if TYPE_CHECKING:
+    from flask import Flask
+
+    from cloudsim.cli.lazy import LazyGroup
 
 # The order is the order of the API's OpenAPI sections.
 FEATURES = (
@@ -35,7 +37,7 @@ class Feature(Protocol):
 
     def init_app(self, app: Flask) -> None: ...
 
-    def init_cli(self, cli: click.Group) -> None: ...
+    def init_cli(self, cli: LazyGroup) -> None: ...
 
 
 def features() -> list[Feature]:

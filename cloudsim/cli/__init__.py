@@ -6,15 +6,18 @@ import json
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from functools import wraps
-from typing import Any, TypeVar, cast
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import click
-from flask import Flask
 
-from cloudsim import extensions  # not `db`: that name is the `cloudsim db` submodule
-from cloudsim.config import Config, ConfigError
+from cloudsim.cli.lazy import LazyGroup
 from cloudsim.errors import CloudSimError
-from cloudsim.web.inputs import INT32_MAX
+from cloudsim.limits import INT32_MAX
+
+if TYPE_CHECKING:
+    from flask import Flask
+
+# Flask, the models and the config load when a command runs, never for `cloudsim --help`.
 
 F = TypeVar("F", bound=Callable[..., Any])
 # A row's id as a command's argument: one the database can hold, else click's usage error.
@@ -30,6 +33,7 @@ class AppHolder:
     def get(self) -> Flask:
         if self._app is None:
             from cloudsim.app import create_app
+            from cloudsim.config import Config
 
             self._app = create_app(Config.from_env())
         return self._app
@@ -38,6 +42,8 @@ class AppHolder:
 @contextmanager
 def app_context() -> Iterator[Flask]:
     """Yield the app inside its context; commit what the block changed (the command's boundary)."""
+    from cloudsim import extensions  # not `db`: that name is the `cloudsim db` submodule
+
     holder = click.get_current_context().find_object(AppHolder)
     assert holder is not None
     app = holder.get()
@@ -52,6 +58,8 @@ def app_context() -> Iterator[Flask]:
 
 def commit() -> None:
     """Commit the command's work now, before it only waits and reads (its jobs start here)."""
+    from cloudsim import extensions
+
     extensions.db.session.commit()
 
 
@@ -60,6 +68,8 @@ def reports_errors(fn: F) -> F:
 
     @wraps(fn)
     def wrapped(*args: Any, **kwargs: Any) -> Any:
+        from cloudsim.config import ConfigError
+
         try:
             return fn(*args, **kwargs)
         except (CloudSimError, ConfigError) as exc:
@@ -73,7 +83,8 @@ def emit(data: Any, as_json: bool, text: str) -> None:
     click.echo(json.dumps(data, indent=2, default=str) if as_json else text)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="cloudsim", message="cloudsim %(version)s")
 @click.pass_context
 def main(ctx: click.Context) -> None:
     """CloudSim: cloud-hosted, real-time robot simulation competitions."""
@@ -81,11 +92,14 @@ def main(ctx: click.Context) -> None:
 
 
 def _register() -> None:
-    from cloudsim.cli import db, up
     from cloudsim.features import features
 
-    main.add_command(up.up)
-    main.add_command(db.db)
+    main.add_lazy_command(
+        "up",
+        "cloudsim.cli.up:up",
+        "Run CloudSim on this machine until Ctrl-C: Redis (if needed), workers, beat, web.",
+    )
+    main.add_lazy_command("db", "cloudsim.cli.db:db", "Migrate the database schema.")
     for feature in features():
         feature.init_cli(main)
 

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 from datetime import timedelta
+from typing import TYPE_CHECKING
 
-import click
-from flask import Flask
+if TYPE_CHECKING:
+    from flask import Flask
+
+    from cloudsim.cli.lazy import LazyGroup
 
 
 def init_app(app: Flask) -> None:
@@ -20,9 +23,12 @@ def init_app(app: Flask) -> None:
     schedule_task(app, "cloudsim.competition.supervise", every)
 
 
-def init_cli(cli: click.Group) -> None:
+def init_cli(cli: LazyGroup) -> None:
     """Add this feature's commands to `cloudsim`."""
-    from cloudsim.competition.cli import leaderboard, run, schedule_group, task
-
-    for command in (task, schedule_group, run, leaderboard):
-        cli.add_command(command)
+    where = "cloudsim.competition.cli"
+    cli.add_lazy_command("task", f"{where}:task", "Schedule, list and delete tasks.")
+    cli.add_lazy_command(
+        "schedule", f"{where}:schedule_group", "Import and export the season's schedule (YAML)."
+    )
+    cli.add_lazy_command("run", f"{where}:run", "Start, stop and look at runs.")
+    cli.add_lazy_command("leaderboard", f"{where}:leaderboard", "Print the ranking of the teams.")

@@ -5,9 +5,12 @@
 from __future__ import annotations
 
 from datetime import timedelta
+from typing import TYPE_CHECKING
 
-import click
-from flask import Flask
+if TYPE_CHECKING:
+    from flask import Flask
+
+    from cloudsim.cli.lazy import LazyGroup
 
 
 def init_app(app: Flask) -> None:
@@ -21,8 +24,10 @@ def init_app(app: Flask) -> None:
     schedule_task(app, "cloudsim.launched_constellations.reconcile", timedelta(minutes=5))
 
 
-def init_cli(cli: click.Group) -> None:
+def init_cli(cli: LazyGroup) -> None:
     """Add this feature's commands to `cloudsim`."""
-    from cloudsim.launched_constellations.cli import constellation
-
-    cli.add_command(constellation)
+    cli.add_lazy_command(
+        "constellation",
+        "cloudsim.launched_constellations.cli:constellation",
+        "Launch, list, show and terminate constellations.",
+    )

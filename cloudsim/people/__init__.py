@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
-import click
-from flask import Flask
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from flask import Flask
+
+    from cloudsim.cli.lazy import LazyGroup
 
 
 def init_app(app: Flask) -> None:
@@ -15,9 +19,7 @@ def init_app(app: Flask) -> None:
     register_api(app, api.blp)
 
 
-def init_cli(cli: click.Group) -> None:
+def init_cli(cli: LazyGroup) -> None:
     """Add this feature's commands to `cloudsim`."""
-    from cloudsim.people.cli import team, user
-
-    cli.add_command(team)
-    cli.add_command(user)
+    cli.add_lazy_command("team", "cloudsim.people.cli:team", "Create and list teams.")
+    cli.add_lazy_command("user", "cloudsim.people.cli:user", "Create, list and change users.")

@@ -4,9 +4,12 @@ uploads from team instances (the master's ingest, an instance's outbox), checked
 from __future__ import annotations
 
 from datetime import timedelta
+from typing import TYPE_CHECKING
 
-import click
-from flask import Flask
+if TYPE_CHECKING:
+    from flask import Flask
+
+    from cloudsim.cli.lazy import LazyGroup
 
 
 def init_app(app: Flask) -> None:
@@ -25,8 +28,10 @@ def init_app(app: Flask) -> None:
     schedule_task(app, staging.TASK, staging.EVERY)
 
 
-def init_cli(cli: click.Group) -> None:
+def init_cli(cli: LazyGroup) -> None:
     """Add this feature's commands to `cloudsim` (`cloudsim leaderboard` is the competition's)."""
-    from cloudsim.portal.cli import portal
-
-    cli.add_command(portal)
+    cli.add_lazy_command(
+        "portal",
+        "cloudsim.portal.cli:portal",
+        "The portal: where team instances upload their runs.",
+    )

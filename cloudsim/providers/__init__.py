@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
-import click
-from flask import Flask
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from flask import Flask
+
+    from cloudsim.cli.lazy import LazyGroup
 
 
 def init_app(app: Flask) -> None:
@@ -14,8 +18,10 @@ def init_app(app: Flask) -> None:
     register_api(app, api.blp)
 
 
-def init_cli(cli: click.Group) -> None:
+def init_cli(cli: LazyGroup) -> None:
     """Add this feature's commands to `cloudsim`."""
-    from cloudsim.providers.cli import provider
-
-    cli.add_command(provider)
+    cli.add_lazy_command(
+        "provider",
+        "cloudsim.providers.cli:provider",
+        "Configure and list the providers constellations can be launched on.",
+    )

@@ -5,9 +5,12 @@ every CloudSim answers its master on."""
 from __future__ import annotations
 
 from datetime import timedelta
+from typing import TYPE_CHECKING
 
-import click
-from flask import Flask
+if TYPE_CHECKING:
+    from flask import Flask
+
+    from cloudsim.cli.lazy import LazyGroup
 
 
 def init_app(app: Flask) -> None:
@@ -25,8 +28,10 @@ def init_app(app: Flask) -> None:
     )
 
 
-def init_cli(cli: click.Group) -> None:
+def init_cli(cli: LazyGroup) -> None:
     """Add this feature's commands to `cloudsim`."""
-    from cloudsim.team_instances.cli import instance
-
-    cli.add_command(instance)
+    cli.add_lazy_command(
+        "instance",
+        "cloudsim.team_instances.cli:instance",
+        "Deploy and watch team instances (a CloudSim per team, run from this master).",
+    )

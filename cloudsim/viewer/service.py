@@ -10,10 +10,9 @@ import shutil
 import threading
 from collections import OrderedDict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drcsim import rundir
-from drcsim.viewer import StateLogPoses, world_scene
 from sqlalchemy import select
 
 from cloudsim.competition.artifacts import LogStore, artifact_for
@@ -22,6 +21,12 @@ from cloudsim.config import Config
 from cloudsim.errors import Conflict, Forbidden, InvalidInput
 from cloudsim.extensions import db
 from cloudsim.models import Role, Run, RunState, User, World
+
+if TYPE_CHECKING:
+    from drcsim.viewer import StateLogPoses
+
+# drcsim.viewer builds worlds in pybullet: it is imported where a scene or a replay is made,
+# so that the web app and the command line start without the physics engine.
 
 REPLAY_EVERY = 3  # every third 100 Hz state record: 33 frames per simulated second
 MAX_CHUNK_SECONDS = 30.0
@@ -59,6 +64,8 @@ def live_run_for(actor: User, run_id: int) -> Run:
 
 @functools.lru_cache(maxsize=16)
 def _scene(world: str, config: str, document: str) -> dict[str, Any]:
+    from drcsim.viewer import world_scene
+
     return world_scene(world, config, json.loads(document) if document else None)
 
 
@@ -92,6 +99,8 @@ class _Replays:
             if run_id in self.open:
                 self.open.move_to_end(run_id)
                 return self.open[run_id]
+            from drcsim.viewer import StateLogPoses
+
             entry = (StateLogPoses(folder), threading.Lock())
             self.open[run_id] = entry
             while len(self.open) > OPEN_REPLAYS:

@@ -23,10 +23,8 @@ from wtforms import IntegerField
 from wtforms.validators import NumberRange
 
 from cloudsim.errors import InvalidInput
+from cloudsim.limits import INT32_MAX, INT64_MAX
 
-# Every id column is a 32-bit signed INTEGER in PostgreSQL; counters and bit caps are 64-bit.
-INT32_MAX = 2**31 - 1
-INT64_MAX = 2**63 - 1
 MAX_BODY_BYTES = 2 * 1024 * 1024
 MAX_JSON_DEPTH = 32
 MAX_FORM_PARTS = 200

@@ -4,8 +4,12 @@ propagated to team instances."""
 
 from __future__ import annotations
 
-import click
-from flask import Flask
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from flask import Flask
+
+    from cloudsim.cli.lazy import LazyGroup
 
 
 def init_app(app: Flask) -> None:
@@ -17,8 +21,10 @@ def init_app(app: Flask) -> None:
     register_api(app, api.blp)
 
 
-def init_cli(cli: click.Group) -> None:
+def init_cli(cli: LazyGroup) -> None:
     """Add this feature's commands to `cloudsim`."""
-    from cloudsim.worlds.cli import world
-
-    cli.add_command(world)
+    cli.add_lazy_command(
+        "world",
+        "cloudsim.worlds.cli:world",
+        "World definitions: run configurations and scoring rules, as data.",
+    )

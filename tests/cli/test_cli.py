@@ -42,6 +42,53 @@ def test_help_lists_the_commands() -> None:
         assert f"  {command} " in out
 
 
+def test_help_imports_no_command_and_no_engine() -> None:
+    """`cloudsim --help` and `--version` load neither Flask, the models nor pybullet: the
+    commands are listed from their table and imported only when one runs."""
+    probe = (
+        "import sys\n"
+        "from cloudsim.cli import main\n"
+        "try:\n"
+        "    main(sys.argv[1:])\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "heavy = sorted({m.split('.')[0] for m in sys.modules} & "
+        "{'flask', 'sqlalchemy', 'celery', 'pybullet', 'drcsim', 'paramiko'})\n"
+        "print('HEAVY', heavy)\n"
+    )
+    for args in (["--help"], ["--version"]):
+        result = subprocess.run(
+            [str(Path(".venv/bin/python").absolute()), "-c", probe, *args],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        assert result.stdout.splitlines()[-1] == "HEAVY []", result.stdout
+        assert result.stderr == ""
+    version = subprocess.run(
+        [str(Path(".venv/bin/python").absolute()), "-m", "cloudsim.cli", "--version"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    from importlib.metadata import version as installed
+
+    assert version.strip() == f"cloudsim {installed('cloudsim')}"
+
+
+def test_the_listed_help_is_each_commands_own() -> None:
+    """The one-line help `cloudsim --help` shows without importing a command is the command's."""
+    from click import Context
+
+    assert main.lazy_commands, "the commands are registered lazily"
+    for name, lazy in main.lazy_commands.items():
+        command = lazy.load()
+        assert command.name == name, name
+        assert command.get_short_help_str(1000) == lazy.help, name
+    listed = main.list_commands(Context(main))
+    assert set(main.lazy_commands) <= set(listed)
+
+
 def test_db_current_and_downgrade(run: Callable[..., Result]) -> None:
     from alembic.script import ScriptDirectory
 
