@@ -5,6 +5,7 @@ from __future__ import annotations
 from flask import Flask, request
 from flask_smorest import Api, Blueprint
 
+from cloudsim import __version__
 from cloudsim.extensions import csrf
 from cloudsim.web.inputs import IdConverter, id_param_schema
 
@@ -19,7 +20,7 @@ def init_api(app: Flask) -> Api:
     """Create the API; it describes every blueprint at /api/v1/openapi.json."""
     app.config.update(
         API_TITLE="CloudSim API",
-        API_VERSION="v1",
+        API_VERSION=__version__,  # the OpenAPI info.version: this CloudSim's release
         OPENAPI_VERSION="3.0.3",
         OPENAPI_URL_PREFIX=API_PREFIX,
         OPENAPI_JSON_PATH="openapi.json",

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import click
 
+from cloudsim import __version__
 from cloudsim.cli.lazy import LazyGroup
 from cloudsim.errors import CloudSimError
 from cloudsim.limits import INT32_MAX
@@ -84,7 +85,7 @@ def emit(data: Any, as_json: bool, text: str) -> None:
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="cloudsim", message="cloudsim %(version)s")
+@click.version_option(__version__, message="cloudsim %(version)s")
 @click.pass_context
 def main(ctx: click.Context) -> None:
     """CloudSim: cloud-hosted, real-time robot simulation competitions."""

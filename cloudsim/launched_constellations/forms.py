@@ -15,7 +15,7 @@ class LaunchForm(FlaskForm):
     """Name, kind, provider and team of a new constellation."""
 
     name = StringField("Name", validators=[DataRequired(), Length(max=24)])
-    kind = SelectField("Kind")
+    kind = SelectField("Kind", default="vrc")  # what most launches are: a team's four machines
     provider = SelectField("Provider")
     team = SelectField("Team")
 

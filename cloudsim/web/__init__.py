@@ -11,6 +11,7 @@ from flask_wtf.csrf import CSRFError
 from markupsafe import escape
 from werkzeug.exceptions import HTTPException
 
+from cloudsim import __version__
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.models import Role
@@ -29,7 +30,7 @@ MESSAGES = {
 
 def register_web(app: Flask) -> None:
     """Register the error pages and the template globals every page uses."""
-    app.jinja_env.globals.update(Role=Role)
+    app.jinja_env.globals.update(Role=Role, cloudsim_version=__version__)
     app.jinja_env.filters["datetime"] = format_datetime
     app.jinja_env.filters["b64encode"] = _b64encode
 

@@ -121,3 +121,31 @@ def test_officer_creates_team_and_user_who_sees_only_their_team(
     page.goto(f"{live_url}/users")
     expect(page.get_by_role("heading", name="403")).to_be_visible()
     context.close()
+
+
+def test_the_pages_a_newcomer_meets_first(
+    app: Flask, live_url: str, browser: Browser, people: dict[str, User | None]
+) -> None:
+    """No request fails (the favicon included), the launch form offers a vrc, a job without an
+    error shows no Error row, and every page says which CloudSim it is."""
+    from cloudsim import __version__
+    from cloudsim.models import Job, JobState
+
+    job = Job(id="0" * 36, kind="diagnostics", state=JobState.SUCCEEDED, params={})
+    db.session.add(job)
+    db.session.commit()
+    context = browser.new_context()
+    page = context.new_page()
+    failed: list[str] = []
+    page.on("response", lambda r: failed.append(f"{r.status} {r.url}") if r.status >= 400 else None)
+    page.on("console", lambda m: failed.append(m.text) if m.type == "error" else None)
+
+    _log_in(page, live_url, people["admin"].email, PASSWORD)  # type: ignore[union-attr]
+    page.get_by_role("link", name="Constellations").click()
+    expect(page.get_by_label("Kind")).to_have_value("vrc")
+    expect(page.locator("footer")).to_have_text(f"CloudSim {__version__}")
+    page.goto(f"{live_url}/jobs/{job.id}")
+    expect(page.get_by_text("Error", exact=True)).to_be_hidden()
+    page.wait_for_load_state("networkidle")
+    assert failed == []
+    context.close()

@@ -14,6 +14,7 @@
       state.textContent = data.state;
       state.className = "state " + data.state;
       document.getElementById("c-error").textContent = data.error || "";
+      document.getElementById("c-error").parentElement.hidden = !data.error;  // no empty row
       for (const m of data.machines) {
         const row = document.querySelector(`tr[data-machine="${m.name}"]`);
         if (!row) continue;

@@ -18,6 +18,7 @@
       document.getElementById("job-percent").textContent = job.progress + "%";
       document.getElementById("job-attempts").textContent = job.attempts;
       document.getElementById("job-error").textContent = job.error || "";
+      document.getElementById("job-error").parentElement.hidden = !job.error;  // no empty row
       if (job.log) { log.textContent += job.log; log.scrollTop = log.scrollHeight; }
       length = job.log_length;
       if (job.state === "succeeded" || job.state === "failed") return;

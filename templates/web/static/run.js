@@ -25,6 +25,7 @@
       document.getElementById("run-time").textContent = data.sim_seconds.toFixed(1);
       document.getElementById("run-end").textContent = data.end_reason || "";
       document.getElementById("run-error").textContent = data.error || "";
+      document.getElementById("run-error").parentElement.hidden = !data.error;  // no empty row
       document.getElementById("uplink-left").textContent = data.bits_left.uplink.toLocaleString("en-US");
       document.getElementById("downlink-left").textContent = data.bits_left.downlink.toLocaleString("en-US");
       const caps = document.getElementById("caps-spent");
