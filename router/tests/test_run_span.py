@@ -6,7 +6,6 @@ import json
 from pathlib import Path
 
 import pytest
-
 from csrouter.bandwidth_log import read_bandwidth_log, run_span_lines
 from csrouter.cli import main
 from csrouter.config import RouterConfig
