@@ -293,14 +293,18 @@ def _stop_on_machines(
     if reach.router is not None:
         # disarmed only once the simulator has stopped: its caps held to its last second
         ctx.stage("router", 30)
+        span: tuple[float, float] | None = None
         try:
-            router_control.ensure_disarmed(reach.executor, reach.router, router_run_id(run))
-        except CloudSimError as exc:
+            span = simulator_span(reach.executor, reach.sim, run)
+            router_control.ensure_disarmed(
+                reach.executor, reach.router, router_run_id(run), covering=span[1]
+            )
+        except (CloudSimError, SSHError) as exc:
             problems.append(str(exc))
         step_done("run.stop", "router")
         try:
             # however late the disarm came (a resumed stop), the run's log ends with the run
-            span = simulator_span(reach.executor, reach.sim, run)
+            span = span or simulator_span(reach.executor, reach.sim, run)
             destination = f"{run_dir(run.id)}/bandwidth.jsonl"
             router_control.save_run_log(
                 reach.executor, reach.router, router_run_id(run), span, destination

@@ -8,8 +8,11 @@ commands, exit codes and counters schema are csrouter's own (csrouter.protocol).
 from __future__ import annotations
 
 import json
+import math
 import shlex
+import time
 from dataclasses import dataclass
+from datetime import datetime
 from pathlib import PurePosixPath
 from typing import Any
 
@@ -21,6 +24,7 @@ from provisioners.remote.ssh import SSHError, SSHExecutor, SSHTarget
 
 BANDWIDTH_LOG = protocol.BANDWIDTH_LOG
 CONTROL_TIMEOUT = 30
+MAX_LINE_WAIT_S = 1.5
 
 
 class RouterError(CloudSimError):
@@ -72,12 +76,24 @@ def ensure_armed(executor: SSHExecutor, router: SSHTarget, limits: Limits, run_i
     return True
 
 
-def ensure_disarmed(executor: SSHExecutor, router: SSHTarget, run_id: str) -> bool:
-    """Disarm the run if the router still counts it; return whether it disarmed now."""
+def ensure_disarmed(
+    executor: SSHExecutor, router: SSHTarget, run_id: str, covering: float | None = None
+) -> bool:
+    """Disarm the run if the router still counts it; return whether it disarmed now.
+
+    With `covering` (epoch seconds, the simulator's end), first wait (a second at most) until
+    the router's log has a line for the second that holds it, so the log covers the run's end.
+    """
     found = counters(executor, router)
     if not (found.get("armed") and found.get("run_id") == run_id):
         executor.log(router.name, f"{run_id} is not armed (any more)")
         return False
+    if covering is not None and found.get("armed_at") and found.get("elapsed_s") is not None:
+        armed_at = datetime.fromisoformat(found["armed_at"]).timestamp()
+        line_end = armed_at + math.ceil(covering - armed_at)
+        wait = line_end - (armed_at + float(found["elapsed_s"]))
+        if 0 < wait <= MAX_LINE_WAIT_S:
+            time.sleep(wait + 0.05)  # the router writes a line at each whole second
     disarm(executor, router)
     return True
 
