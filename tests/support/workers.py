@@ -81,6 +81,25 @@ def crash_worker(config: Config, root: Path, after: str) -> subprocess.Popen[byt
     )
 
 
+def kill_worker_tree(process: subprocess.Popen[bytes]) -> None:
+    """SIGKILL the worker and everything under it (pool, the processes jobs started)."""
+    found, queue = [], [process.pid]
+    while queue:
+        pid = queue.pop()
+        found.append(pid)
+        for task in Path(f"/proc/{pid}/task").glob("*"):
+            try:
+                queue += map(int, (task / "children").read_text().split())
+            except FileNotFoundError:
+                continue  # gone meanwhile
+    for pid in found:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            continue
+    process.wait()
+
+
 def job_finished(job_id: str, timeout: float) -> Job:
     """Commit the test's work (so its jobs are sent), wait for a job to end; return its row."""
     db.session.commit()  # the test is the boundary: its commit sends the job
