@@ -77,6 +77,7 @@ def _key_files(root: Path) -> list[Path]:
     return [p for p in root.rglob("*") if p.is_file()] if root.exists() else []
 
 
+@pytest.mark.timeout(1500)  # a launch, killed and resumed
 def test_a_check_killed_with_its_worker_tree_is_revoked_and_leaves_no_key(
     check_app: Flask, check_config: Config, pytestconfig: pytest.Config
 ) -> None:
