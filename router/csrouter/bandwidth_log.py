@@ -173,7 +173,7 @@ def run_span_lines(
     out += [
         {**r, "second": int(r["second"]) - first + 1, "router_second": r["second"]} for r in kept
     ]
-    span = {
+    span: dict[str, Any] = {
         "time": utc_iso(ended_at),
         "event": "run_span",
         "run_id": run_id,
