@@ -28,7 +28,6 @@ from sqlalchemy import select
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
-from cloudsim.launched_constellations.router_control import BANDWIDTH_LOG
 from cloudsim.models import Artifact, Run
 from provisioners.remote.ssh import SSHError, SSHExecutor, SSHTarget
 from provisioners.remote.ssh.openssh import OpenSSH
@@ -224,20 +223,6 @@ def remote_inventory(
         elif rest:
             checksums[rest.strip()] = first
     return sizes, checksums
-
-
-def snapshot_bandwidth_log(executor: SSHExecutor, router: SSHTarget, run_id: int) -> None:
-    """Copy the router's bandwidth log beside the run's other logs, once (the router starts a
-    new one at the next arm)."""
-    folder = run_dir(run_id)
-    final = shlex.quote(f"{folder}/bandwidth.jsonl")
-    partial = shlex.quote(f"{folder}/.bandwidth.jsonl.part")
-    executor.run(
-        router,
-        f"mkdir -p {shlex.quote(folder)} && (test -f {final} || "
-        f"(cp {shlex.quote(BANDWIDTH_LOG)} {partial} && mv {partial} {final}))",
-        timeout=600,
-    )
 
 
 def collect_logs(

@@ -1,6 +1,10 @@
 """A run's life as jobs: start (arm the router, start the simulator) and stop (stop it,
 disarm, collect the logs, score).
 
+Both are resumable step by step: each step reads a fact from the machines before it acts
+(`run_steps.py`), so the router is armed before the simulator starts and only once per run,
+and the run's bandwidth log is cut to the simulator's own span (docs/metering.md).
+
 The simulator runs on `sim` as a transient systemd service, so it outlives the job (and the
 worker) that started it; the beat (`supervision.py`) decides when it ends, whoever started it.
 """
@@ -12,20 +16,16 @@ import shlex
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from datetime import datetime
 
 from csrouter.bandwidth_log import read_bandwidth_log
 from drcsim.rundir import FINAL, SCORE, WORLD, read_score_log, serve_argv
 from flask import current_app
 
 from cloudsim.competition import current_run, lifecycle
-from cloudsim.competition.artifacts import (
-    LogStore,
-    artifact_for,
-    collect_logs,
-    run_dir,
-    snapshot_bandwidth_log,
-)
+from cloudsim.competition.artifacts import LogStore, artifact_for, collect_logs, run_dir
 from cloudsim.competition.lifecycle import RunJob
+from cloudsim.competition.run_steps import simulator_span, step_done, unit_started_at
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
@@ -176,27 +176,40 @@ def _allowed_networks(run: Run) -> list[str]:
     return [n for n in networks if n]
 
 
+def router_run_id(run: Run) -> str:
+    """Return the run's name on its router (csrouter's run id)."""
+    return f"run-{run.id}"
+
+
 @job_kind("run.start", payload=RunJob)
 def start_run_job(ctx: JobContext, job: RunJob) -> None:
-    """Arm the router and start the simulator; the run is then `running` until the beat ends it."""
+    """Arm the router, start the simulator, tell the field computers; the run is then
+    `running` until the beat ends it. A resumed start finds what was done and goes on."""
     run = ctx.load(Run, job.run_id)
     if run.state != RunState.STARTING:
         ctx.log(f"run {run.id} is {run.state.value}; nothing to start")
         return
+    step_done("run.start", "claimed")
     config: Config = current_app.config["CLOUDSIM"]
     task = run.task
     try:
         with machines(run, config, ctx) as reach:
             if reach.router is not None:
+                # counting and capped before the simulator exists: no second of it unmetered
                 ctx.stage("router", 20)
                 limits = router_control.Limits(
                     task.latency_ms, task.uplink_bits, task.downlink_bits
                 )
-                router_control.arm(reach.executor, reach.router, limits, f"run-{run.id}")
+                router_control.ensure_armed(
+                    reach.executor, reach.router, limits, router_run_id(run)
+                )
+                step_done("run.start", "router")
             ctx.stage("simulator", 60)
-            _start_simulator(reach, run)
-            run.running_at = utcnow()
+            run.running_at = _start_simulator(reach, run)
+            step_done("run.start", "simulator")
+            ctx.stage("announce", 80)
             current_run.announce(reach.executor, reach.field_computers, run, reach.sim_ip)
+            step_done("run.start", "announce")
     except (CloudSimError, SSHError, ValueError) as exc:
         db.session.rollback()
         run = ctx.load(Run, job.run_id)
@@ -209,7 +222,8 @@ def start_run_job(ctx: JobContext, job: RunJob) -> None:
     lifecycle.stop_requested_while_starting(run)
 
 
-def _start_simulator(reach: Machines, run: Run) -> None:
+def _start_simulator(reach: Machines, run: Run) -> datetime:
+    """Start the run's simulator unless it runs (or ran) already; return when it started."""
     unit = shlex.quote(unit_name(run.id))
     final = shlex.quote(f"{run_dir(run.id)}/{FINAL}")
     state = reach.executor.run(
@@ -220,13 +234,15 @@ def _start_simulator(reach: Machines, run: Run) -> None:
     ).stdout.strip()
     if state in ("active", "ended"):
         reach.executor.log(reach.sim.name, f"simulator of run {run.id} already {state}")
-        return
+        started = unit_started_at(reach.executor, reach.sim, unit_name(run.id))
+        return started or run.running_at or utcnow()
     command = simulator_command(run, reach.sim_ip, _allowed_networks(run))
     world = world_for_run(run.task.world, run.task.run_config)
     reach.executor.log(
         reach.sim.name, f"world {world.name} version {world.version} ({world.digest[:12]})"
     )
     reach.executor.run(reach.sim, command, timeout=60)
+    return utcnow()
 
 
 @job_kind("run.stop", payload=RunJob)
@@ -238,6 +254,7 @@ def stop_run_job(ctx: JobContext, job: RunJob) -> None:
         return
     lifecycle.stopping(run)
     ctx.checkpoint()
+    step_done("run.stop", "claimed")
     config: Config = current_app.config["CLOUDSIM"]
     # A router fault seen during the run is kept on the record; it does not fail the run.
     router_note = run.error if run.error and run.error.startswith(ROUTER_FAULT) else None
@@ -267,25 +284,44 @@ def _stop_on_machines(
         reach.executor.run(reach.sim, f"systemctl stop {unit} || true", timeout=STOP_TIMEOUT_S + 30)
     except SSHError as exc:
         problems.append(f"simulator: {exc}")
+    step_done("run.stop", "simulator")
     try:
         current_run.withdraw(reach.executor, reach.field_computers)
     except SSHError as exc:
         problems.append(f"current-run.json: {exc}")
+    step_done("run.stop", "withdrawn")
     if reach.router is not None:
+        # disarmed only once the simulator has stopped: its caps held to its last second
         ctx.stage("router", 30)
+        span: tuple[float, float] | None = None
         try:
-            router_control.disarm(reach.executor, reach.router)
+            span = simulator_span(reach.executor, reach.sim, run)
+        except SSHError as exc:
+            problems.append(f"the simulator's span: {exc}")
+        try:  # disarmed even when sim does not answer: an armed router would go on counting
+            router_control.ensure_disarmed(
+                reach.executor, reach.router, router_run_id(run), covering=span[1] if span else None
+            )
         except CloudSimError as exc:
             problems.append(str(exc))
+        step_done("run.stop", "router")
         try:
-            snapshot_bandwidth_log(reach.executor, reach.router, run.id)
-        except SSHError as exc:
+            # however late the disarm came (a resumed stop), the run's log ends with the run
+            span = span or simulator_span(reach.executor, reach.sim, run)
+            destination = f"{run_dir(run.id)}/bandwidth.jsonl"
+            router_control.save_run_log(
+                reach.executor, reach.router, router_run_id(run), span, destination
+            )
+        except (CloudSimError, SSHError) as exc:
             problems.append(f"bandwidth log: {exc}")
+        step_done("run.stop", "bandwidth")
     ctx.stage("logs", 50)
     staging = config.instance_dir / "staging" / "runs" / str(run.id)
-    return problems + collect_logs(
+    problems += collect_logs(
         run, reach.executor, reach.by_role(), store, staging, lambda line: ctx.log(line)
     )
+    step_done("run.stop", "logs")
+    return problems
 
 
 def score_run(run: Run, store: LogStore) -> None:

@@ -77,9 +77,9 @@ def start_failed(run: Run, error: str) -> None:
 
 
 def running(run: Run) -> None:
-    """Mark a started run running."""
+    """Mark a started run running (since its simulator started, when the job knows it)."""
     run.state = RunState.RUNNING
-    run.running_at = utcnow()
+    run.running_at = run.running_at or utcnow()
 
 
 def stop_requested_while_starting(run: Run) -> None:

@@ -17,11 +17,18 @@ def init_app(app: Flask) -> None:
     """Register this feature's pages, API and jobs with the app."""
     from cloudsim.api import register_api
     from cloudsim.jobs.queue import schedule_task
-    from cloudsim.launched_constellations import api, jobs, reconcile, views  # noqa: F401 (tasks)
+    from cloudsim.launched_constellations import (  # noqa: F401 (tasks)
+        api,
+        check_sweeper,
+        jobs,
+        reconcile,
+        views,
+    )
 
     app.register_blueprint(views.bp)
     register_api(app, api.blp)
     schedule_task(app, "cloudsim.launched_constellations.reconcile", timedelta(minutes=5))
+    schedule_task(app, "cloudsim.launched_constellations.sweep_vpn_checks", timedelta(minutes=1))
 
 
 def init_cli(cli: LazyGroup) -> None:

@@ -8,8 +8,12 @@ commands, exit codes and counters schema are csrouter's own (csrouter.protocol).
 from __future__ import annotations
 
 import json
+import math
 import shlex
+import time
 from dataclasses import dataclass
+from datetime import datetime
+from pathlib import PurePosixPath
 from typing import Any
 
 from csrouter import protocol
@@ -20,6 +24,7 @@ from provisioners.remote.ssh import SSHError, SSHExecutor, SSHTarget
 
 BANDWIDTH_LOG = protocol.BANDWIDTH_LOG
 CONTROL_TIMEOUT = 30
+MAX_LINE_WAIT_S = 1.5
 
 
 class RouterError(CloudSimError):
@@ -55,6 +60,66 @@ def arm(executor: SSHExecutor, router: SSHTarget, limits: Limits, run_id: str) -
     """Set the run's latency and caps, zero the counters, start a new bandwidth log."""
     args = protocol.arm_args(limits.latency_ms, limits.uplink_bits, limits.downlink_bits, run_id)
     _csrouter(executor, router, *args)
+
+
+def ensure_armed(executor: SSHExecutor, router: SSHTarget, limits: Limits, run_id: str) -> bool:
+    """Arm the run unless the router is armed for it already; return whether it armed now.
+
+    A fact first, then the change (a resumed start must find the run counting and leave its
+    counters alone); csrouter's own arm keeps them too when asked twice.
+    """
+    found = counters(executor, router)
+    if found.get("armed") and found.get("run_id") == run_id:
+        executor.log(router.name, f"{run_id} is armed already (since {found.get('armed_at')})")
+        return False
+    arm(executor, router, limits, run_id)
+    return True
+
+
+def ensure_disarmed(
+    executor: SSHExecutor, router: SSHTarget, run_id: str, covering: float | None = None
+) -> bool:
+    """Disarm the run if the router still counts it; return whether it disarmed now.
+
+    With `covering` (epoch seconds, the simulator's end), first wait (a second at most) until
+    the router's log has a line for the second that holds it, so the log covers the run's end.
+    """
+    found = counters(executor, router)
+    if not (found.get("armed") and found.get("run_id") == run_id):
+        executor.log(router.name, f"{run_id} is not armed (any more)")
+        return False
+    if covering is not None and found.get("armed_at") and found.get("elapsed_s") is not None:
+        armed_at = datetime.fromisoformat(found["armed_at"]).timestamp()
+        line_end = armed_at + math.ceil(covering - armed_at)
+        wait = line_end - (armed_at + float(found["elapsed_s"]))
+        if 0 < wait <= MAX_LINE_WAIT_S:
+            time.sleep(wait + 0.05)  # the router writes a line at each whole second
+    disarm(executor, router)
+    return True
+
+
+def save_run_log(
+    executor: SSHExecutor,
+    router: SSHTarget,
+    run_id: str,
+    span: tuple[float, float],
+    destination: str,
+) -> None:
+    """Write the run's bandwidth log, cut to the simulator's span, to `destination` on the
+    router unless it is there (written whole or not at all)."""
+    partial = f"{destination}.part"
+    args = protocol.run_log_args(run_id, *span)
+    # cut once: a resumed stop keeps the first cut (the router's log restarts at the next arm)
+    command = (
+        f"mkdir -p {shlex.quote(str(PurePosixPath(destination).parent))} && "
+        f"(test -f {shlex.quote(destination)} || ("
+        f"{CSROUTER_COMMAND} {' '.join(map(shlex.quote, args))} > {shlex.quote(partial)} && "
+        f"mv {shlex.quote(partial)} {shlex.quote(destination)}))"
+    )
+    try:
+        executor.run(router, command, timeout=600)
+    except SSHError as exc:
+        raise RouterError(f"router: the run's bandwidth log: {exc}") from exc
 
 
 def counters(executor: SSHExecutor, router: SSHTarget) -> dict[str, Any]:

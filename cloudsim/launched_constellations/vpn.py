@@ -150,16 +150,67 @@ def revoke_certificate(constellation: Constellation, serial: int, name: str) -> 
     router disconnects)."""
     ca = _ca(constellation)
     before = _revocations(constellation, ca)
+    if serial in before["serials"] and name in before.get("names", []):
+        return  # a new CRL (new dates) for nothing would only churn the router
     serials = sorted({*before["serials"], serial})
     names = sorted({*before.get("names", []), name})
     _revoked_row(constellation).value = json.dumps(
-        {"serials": serials, "crl": pki.issue_crl(ca, serials), "names": names}
+        {**before, "serials": serials, "crl": pki.issue_crl(ca, serials), "names": names}
     )
 
 
 def issue_check_certificate(constellation: Constellation, name: str) -> pki.IssuedCertificate:
-    """Issue a client certificate that is stored nowhere (verification's own VPN client)."""
-    return pki.issue_client(_ca(constellation), name)
+    """Issue verification's own VPN client certificate, its serial recorded as one to revoke
+    (the caller commits before the key is used: whatever dies, the serial is known)."""
+    issued = pki.issue_client(_ca(constellation), name)
+    before = _revocations(constellation, _ca(constellation))
+    pending = [*before.get("pending", []), {"serial": issued.serial, "name": name}]
+    _revoked_row(constellation).value = json.dumps({**before, "pending": pending})
+    return issued
+
+
+def pending_check_certificates(constellation: Constellation) -> list[tuple[int, str]]:
+    """Return the (serial, name) of check certificates whose revocation the router may not
+    have yet (none for a constellation without a VPN: nothing is made here)."""
+    row = db.session.scalar(
+        select(Secret).where(
+            Secret.owner_type == "constellation",
+            Secret.owner_id == constellation.id,
+            Secret.name == REVOKED,
+        )
+    )
+    if row is None:
+        return []
+    return [(int(p["serial"]), str(p["name"])) for p in json.loads(row.value).get("pending", [])]
+
+
+def revoke_check_certificates(constellation: Constellation) -> list[int]:
+    """Put every pending check certificate on the revocation list; return their serials.
+
+    They stay pending until `forget_check_certificates`, once the router has the list.
+    """
+    revoked = []
+    for serial, name in pending_check_certificates(constellation):
+        revoke_certificate(constellation, serial, name)
+        revoked.append(serial)
+    return revoked
+
+
+def forget_check_certificates(constellation: Constellation, serials: Iterable[int]) -> None:
+    """Stop tracking check certificates the router now refuses (audited)."""
+    gone = set(serials)
+    before = _revocations(constellation, _ca(constellation))
+    pending = [p for p in before.get("pending", []) if int(p["serial"]) not in gone]
+    _revoked_row(constellation).value = json.dumps({**before, "pending": pending})
+    for serial in sorted(gone):
+        record(
+            "vpn.check_revoked",
+            SYSTEM,
+            target_type="constellation",
+            target_id=constellation.id,
+            team_id=constellation.team_id,
+            serial=serial,
+        )
 
 
 def client_config(constellation: Constellation, who: str, cert: str, key: str) -> str:

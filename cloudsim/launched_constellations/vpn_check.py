@@ -1,11 +1,18 @@
 """Verification's own VPN client: from the public side it connects to the router, checks the
-kind's `vpn` reachability rows, is revoked, and must then be cut off."""
+kind's `vpn` reachability rows, is revoked, and must then be cut off.
+
+Its certificate's serial is in the database (committed) before the key is written anywhere,
+and the key lives only in a 0700 folder in the instance folder, removed after use; a check
+that dies half-way is cleaned up (revoked, folder removed) by the next check of the
+constellation (the resumed job) or by the sweeper (docs/metering.md).
+"""
 
 from __future__ import annotations
 
+import os
 import secrets
+import shutil
 import subprocess
-import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -13,13 +20,16 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from flask import current_app
+
+from cloudsim.errors import CloudSimError
 from cloudsim.jobs.runner import JobContext
 from cloudsim.launched_constellations import vpn
 from cloudsim.models import Constellation
 from constellations.definition import VPN, Reachability
 from constellations.plans.base import apply_plan
 from constellations.plans.router import revocation
-from provisioners.remote.ssh import SSHExecutor, SSHTarget
+from provisioners.remote.ssh import SSHError, SSHExecutor, SSHTarget
 
 # the provider's way to run argv on "the internet"; None: it has no such place
 PublicCommand = Callable[[list[str]], list[str] | None]
@@ -48,14 +58,20 @@ def check_vpn(
     def there(argv: list[str]) -> list[str]:
         return public_command(argv) or argv  # not None: the provider has a public side
 
+    # an earlier attempt that died half-way: its client is cut off before a new one exists
+    clean_up_checks(executor, constellation, router, ctx.checkpoint, ctx.log)
     name = f"cloudsim-verify-{secrets.token_hex(4)}"
     issued = vpn.issue_check_certificate(constellation, name)
+    ctx.checkpoint()  # the serial is on record before the key is written or used
     config = vpn.client_config(constellation, name, issued.cert_pem, issued.key_pem)
     private = {m.name: m.private_ip or "" for m in constellation.machines}
-    with tempfile.TemporaryDirectory(prefix="cloudsim-vpncheck-") as folder:
-        path = Path(folder) / "check.ovpn"
-        path.touch(mode=0o600)
-        path.write_text(config)
+    folder = _check_folder(constellation) / name
+    folder.mkdir(mode=0o700, parents=True)
+    try:
+        path = folder / "check.ovpn"
+        descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(descriptor, "w") as handle:
+            handle.write(config)
         device = f"tunvc{secrets.token_hex(3)}"  # unique: other checks may run beside it
         # routes by device, not via the VPN's gateway address: another check's client (another
         # constellation, the same VPN network) may sit in the same namespace
@@ -86,6 +102,51 @@ def check_vpn(
             return [*results, {**check_result(after, reached), "after": "revocation"}]
         finally:
             client.stop()
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+        try:  # a check that failed before its revocation must not leave its key valid
+            clean_up_checks(executor, constellation, router, ctx.checkpoint, ctx.log)
+        except (CloudSimError, SSHError) as exc:
+            # still pending in the database: the next check or the sweeper revokes it
+            ctx.log(f"could not revoke the VPN check certificate yet: {exc}")
+
+
+def checks_root() -> Path:
+    """Return the folder (in the instance folder, 0700) that holds check clients' keys."""
+    root = Path(current_app.config["CLOUDSIM"].instance_dir) / "vpn-checks"
+    root.mkdir(mode=0o700, parents=True, exist_ok=True)
+    os.chmod(root, 0o700)
+    return root
+
+
+def _check_folder(constellation: Constellation) -> Path:
+    folder = checks_root() / str(constellation.id)
+    folder.mkdir(mode=0o700, exist_ok=True)
+    return folder
+
+
+def clean_up_checks(
+    executor: SSHExecutor,
+    constellation: Constellation,
+    router: SSHTarget,
+    commit: Callable[[], None],
+    log: Callable[[str], None],
+) -> list[int]:
+    """Revoke the constellation's check certificates still pending, push the list to its
+    router, and remove what their clients left on disk; return the revoked serials.
+
+    `commit` is the caller's (the job's checkpoint, the sweeper's commit): the revocation is
+    on record before the router gets the list.
+    """
+    revoked = vpn.revoke_check_certificates(constellation)
+    if revoked:
+        commit()
+        apply_plan(executor, router, revocation(vpn.server_material(constellation)))
+        vpn.forget_check_certificates(constellation, revoked)
+        commit()
+        log(f"VPN check certificate(s) {revoked} revoked on the router")
+    shutil.rmtree(checks_root() / str(constellation.id), ignore_errors=True)
+    return revoked
 
 
 def check_result(row: Reachability, connected: bool | None) -> dict[str, Any]:

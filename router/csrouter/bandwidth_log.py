@@ -107,7 +107,7 @@ def _read_record(
         for direction in DIRECTIONS:
             result[direction].cap_bits = caps[direction]
         return armed
-    if record.get("event") == "disarmed":
+    if record.get("event") in ("disarmed", "run_span"):
         for direction in DIRECTIONS:
             when = ((record.get("counters") or {}).get(direction) or {}).get("spent_at")
             result[direction].spent_at = datetime.fromisoformat(when) if when else None
@@ -131,3 +131,67 @@ def _read_record(
     series.used_bits = used
     series.remaining_bits = None if remaining is None else int(remaining)
     return start
+
+
+def run_span_lines(
+    lines: Iterable[str], run_id: str, started_at: float, ended_at: float
+) -> list[str]:
+    """Return a run's bandwidth log cut to the simulator's span: its `armed` event, then one
+    line a second per direction for every second from `started_at` to `ended_at` (epoch
+    seconds), renumbered from 1, then a `run_span` event saying where the cut was made.
+
+    The router's log runs from the arm to the disarm; a crash can put either a good while
+    away from the simulator's start or end, and those seconds are not the run's. A line
+    covers the second before its time, so the kept lines are those whose second overlaps the
+    span; each keeps its arm-relative number as `router_second`.
+    """
+    armed: dict[str, Any] | None = None
+    kept: list[dict[str, Any]] = []
+    disarmed: dict[str, Any] | None = None
+    for line in lines:
+        try:
+            record = json.loads(line)
+        except ValueError:
+            continue  # a torn line (the daemon killed mid-write)
+        if not isinstance(record, dict) or record.get("run_id") != run_id:
+            continue
+        if record.get("event") == "armed":
+            armed, kept, disarmed = record, [], None  # only the last arm of a run id counts
+            continue
+        if record.get("event") == "disarmed":
+            disarmed = record
+            continue
+        if "second" not in record or "direction" not in record:
+            continue
+        end_of_second = datetime.fromisoformat(record["time"]).timestamp()
+        if end_of_second > started_at and end_of_second - 1 < ended_at:
+            kept.append(record)
+    if armed is None:
+        return []
+    first = min((int(r["second"]) for r in kept), default=1)
+    out = [armed]
+    out += [
+        {**r, "second": int(r["second"]) - first + 1, "router_second": r["second"]} for r in kept
+    ]
+    span: dict[str, Any] = {
+        "time": utc_iso(ended_at),
+        "event": "run_span",
+        "run_id": run_id,
+        "started_at": utc_iso(started_at),
+        "ended_at": utc_iso(ended_at),
+    }
+    if disarmed is not None:
+        # when a cap was spent counts only if it was spent within the run
+        counters = disarmed.get("counters") or {}
+        span["counters"] = {
+            d: {"spent_at": _within((counters.get(d) or {}).get("spent_at"), ended_at)}
+            for d in DIRECTIONS
+        }
+    out.append(span)
+    return [json.dumps(record, separators=(",", ":")) for record in out]
+
+
+def _within(moment: str | None, ended_at: float) -> str | None:
+    if moment is None or datetime.fromisoformat(moment).timestamp() > ended_at:
+        return None
+    return moment

@@ -11,9 +11,11 @@ import json
 import logging
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from csrouter import __version__
+from csrouter.bandwidth_log import run_span_lines
 from csrouter.config import DEFAULT_CONFIG_PATH, MAX_LATENCY_MS, RouterConfig, load_config
 from csrouter.control import request
 from csrouter.errors import ConfigError, DaemonUnavailable, RouterError
@@ -25,6 +27,7 @@ from csrouter.protocol import (
     EXIT_FAILED,
     EXIT_UNHEALTHY,
     LOG_PATH,
+    RUN_LOG,
     STATUS,
 )
 
@@ -42,6 +45,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == LOG_PATH:
             print(config.bandwidth_log)
             return 0
+        if args.command == RUN_LOG:
+            return _run_log(config, args.run_id, args.started_at, args.ended_at)
         return _control(args, config)
     except DaemonUnavailable as exc:
         if getattr(args, "json", False) and args.command == STATUS:
@@ -69,6 +74,21 @@ def _control(args: argparse.Namespace, config: RouterConfig) -> int:
         _print_text(answer)
     if args.command == STATUS and not answer.get("healthy", False):
         return EXIT_UNHEALTHY
+    return 0
+
+
+def _run_log(config: RouterConfig, run_id: str, started_at: float, ended_at: float) -> int:
+    """Print the run's lines of the bandwidth log (the current one and the one before it)."""
+    current = Path(config.bandwidth_log)
+    lines: list[str] = []
+    for path in (current.with_name(current.name + ".1"), current):
+        if path.exists():
+            lines += path.read_text(errors="replace").splitlines()
+    cut = run_span_lines(lines, run_id, started_at, ended_at)
+    if not cut:
+        print(f"csrouter: no bandwidth log of run {run_id}", file=sys.stderr)
+        return EXIT_FAILED
+    sys.stdout.write("".join(line + "\n" for line in cut))
     return 0
 
 
@@ -115,6 +135,10 @@ def _parser() -> argparse.ArgumentParser:
     for sub in commands.choices.values():
         sub.add_argument("--json", action="store_true", help="print JSON")
     commands.add_parser(LOG_PATH, help="print the bandwidth log's path")
+    run_log = commands.add_parser(RUN_LOG, help="print a run's bandwidth log cut to a span")
+    run_log.add_argument("--run-id", required=True)
+    run_log.add_argument("--from", dest="started_at", type=float, required=True, help="epoch s")
+    run_log.add_argument("--to", dest="ended_at", type=float, required=True, help="epoch s")
     return parser
 
 

@@ -102,7 +102,15 @@ class OcuPath:
         downlink_bits: int | None,
         run_id: str | None,
     ) -> dict[str, Any]:
-        """Start a run: new latency and caps, counters at zero, a new bandwidth log."""
+        """Start a run: new latency and caps, counters at zero, a new bandwidth log.
+
+        Arming the run that is armed already changes nothing (its counters, caps and log go
+        on): an orchestrator that resumes a run's start after a crash must not reset them.
+        """
+        with self.lock:
+            if self.run.armed and run_id is not None and self.run.run_id == run_id:
+                log.info("run %s is armed already; its counters go on", run_id)
+                return {**self.run.counters(self._wall()), "already_armed": True}
         run = Run.arm(
             latency_ms=latency_ms,
             uplink_bits=uplink_bits,
@@ -125,7 +133,7 @@ class OcuPath:
                 uplink_bits,
                 downlink_bits,
             )
-            return self.run.counters(self._wall())
+            return {**self.run.counters(self._wall()), "already_armed": False}
 
     def disarm(self) -> dict[str, Any]:
         """End the run: caps lifted, final counts logged and returned; latency stays."""

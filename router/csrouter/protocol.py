@@ -14,6 +14,8 @@ from csrouter.config import DEFAULT_BANDWIDTH_LOG, MAX_LATENCY_MS
 # Commands of the csrouter CLI that drive a run; the daemon's control socket takes the same ops.
 ARM, DISARM, COUNTERS, STATUS = "arm", "disarm", "counters", "status"
 LOG_PATH = "log-path"
+# `run-log --run-id ID --from EPOCH --to EPOCH`: print the run's bandwidth log cut to that span
+RUN_LOG = "run-log"
 
 # Exit codes: 0 done (status: healthy).
 EXIT_OK = 0
@@ -40,6 +42,11 @@ def arm_args(
     if downlink_bits is not None:
         args += ["--downlink-bits", str(downlink_bits)]
     return args
+
+
+def run_log_args(run_id: str, started_at: float, ended_at: float) -> list[str]:
+    """Return the arguments of `csrouter run-log` for a run's simulator span (epoch seconds)."""
+    return [RUN_LOG, "--run-id", run_id, "--from", f"{started_at:.3f}", "--to", f"{ended_at:.3f}"]
 
 
 def payload_bits_used(counters: dict[str, Any]) -> dict[str, int]:

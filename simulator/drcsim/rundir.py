@@ -142,3 +142,19 @@ def _event(data: dict[str, Any]) -> ScoreEvent:
         points=int(data.get("points", 0)),
         description=description[:255],
     )
+
+
+def read_run_span(lines: Iterable[str]) -> tuple[float | None, float | None]:
+    """Return when (epoch seconds) the score log says the run started and ended, None for
+    what it does not say (a torn or foreign line is skipped)."""
+    started = ended = None
+    for line in lines:
+        try:
+            data = json.loads(line)
+            if isinstance(data, dict) and data.get("event") == "run_start":
+                started = float(data["wall_time"])
+            elif isinstance(data, dict) and data.get("event") == "run_end":
+                ended = float(data["wall_time"])
+        except (ValueError, KeyError, TypeError):
+            continue
+    return started, ended

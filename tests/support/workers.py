@@ -14,10 +14,16 @@ from cloudsim.models import Job
 from tests.support.servers import wait_for
 
 
-def worker_process(config: Config, root: Path) -> subprocess.Popen[bytes]:
+def worker_process(
+    config: Config,
+    root: Path,
+    app: str = "tests.support.worker_app",
+    extra_env: dict[str, str] | None = None,
+) -> subprocess.Popen[bytes]:
     """Start a prefork worker (one pool process) on the config's database and Redis.
 
-    root is the project's folder (pytest's rootpath), where `tests.support` is imported from.
+    root is the project's folder (pytest's rootpath), where `tests.support` is imported from;
+    app the module of its Celery app; extra_env more environment for it.
     """
     env = dict(
         os.environ,
@@ -31,13 +37,14 @@ def worker_process(config: Config, root: Path) -> subprocess.Popen[bytes]:
         CLOUDSIM_LOCAL_SUBNET_POOL=config.local_subnet_pool,
         CLOUDSIM_LOCAL_PUBLIC_CIDR=config.local_public_cidr,
         PYTHONPATH=str(root),
+        **(extra_env or {}),
     )
     argv = [
         sys.executable,
         "-m",
         "celery",
         "-A",
-        "tests.support.worker_app",
+        app,
         "worker",
         "--pool",
         "prefork",
@@ -60,6 +67,36 @@ def kill_worker(process: subprocess.Popen[bytes]) -> None:
     children = Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split()
     for pid in [process.pid, *map(int, children)]:
         os.kill(pid, signal.SIGKILL)
+    process.wait()
+
+
+def crash_worker(config: Config, root: Path, after: str) -> subprocess.Popen[bytes]:
+    """Start a worker that SIGKILLs itself (worker and pool) right after a run job's step,
+    named "KIND:STEP" (cloudsim.competition.run_steps)."""
+    return worker_process(
+        config,
+        root,
+        app="tests.support.crash_worker_app",
+        extra_env={"CLOUDSIM_TEST_CRASH_AFTER": after},
+    )
+
+
+def kill_worker_tree(process: subprocess.Popen[bytes]) -> None:
+    """SIGKILL the worker and everything under it (pool, the processes jobs started)."""
+    found, queue = [], [process.pid]
+    while queue:
+        pid = queue.pop()
+        found.append(pid)
+        for task in Path(f"/proc/{pid}/task").glob("*"):
+            try:
+                queue += map(int, (task / "children").read_text().split())
+            except FileNotFoundError:
+                continue  # gone meanwhile
+    for pid in found:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            continue
     process.wait()
 
 
