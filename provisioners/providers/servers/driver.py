@@ -64,6 +64,8 @@ from provisioners.remote.ssh import (
 EXISTING = "existing"
 LOCATION_ID = "servers"
 DEFAULT_CONNECT_TIMEOUT_SECONDS = 60.0
+# A probe that never connects: what "the internet" gets at a private address.
+UNROUTABLE = ("false",)
 log = logging.getLogger(__name__)
 
 
@@ -369,6 +371,19 @@ class ServersNodeDriver(CloudSimNodeDriver):
                 proxy_command=tuple(server.proxy_command),
             )
         return Route(host=server.address, user=server.user, port=server.port)
+
+    def ex_public_proxy_command(self, ip: str, port: int) -> list[str] | None:
+        """Return how "the internet" reaches ip:port: a server's public address through the
+        inventory's proxy to it, an inventory server's private address not at all (the
+        internet has no route to it, whatever the controller's own way in); None: from here."""
+        for server in self.inventory.servers:
+            if ip == server.public_ip and server.proxy_command and port == server.port:
+                return list(server.proxy_command)
+        public = {server.public_ip for server in self.inventory.servers}
+        private = {server.private_ip for server in self.inventory.servers}
+        if ip in private and ip not in public and ipaddress.ip_address(ip).is_private:
+            return list(UNROUTABLE)
+        return None
 
     def list_sizes(self, location: NodeLocation | None = None) -> list[NodeSize]:
         """Return the single size: whatever the server has."""
