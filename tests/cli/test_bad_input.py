@@ -134,7 +134,7 @@ def _cloudsim(env: dict[str, str], *args: str | bytes) -> subprocess.CompletedPr
         [str(Path(".venv/bin/cloudsim").resolve()), *args],
         capture_output=True,
         env={**os.environ, **env},
-        timeout=60,
+        timeout=300,  # a hang fails; a loaded machine's slow start does not
     )
 
 

@@ -17,7 +17,7 @@ HARDENING = ("Content-Security-Policy", "X-Frame-Options", "X-Content-Type-Optio
 
 def _raw_get(port: int, target: str) -> bytes:
     """Send a GET with a request target of any length; return the whole answer."""
-    with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
+    with socket.create_connection(("127.0.0.1", port), timeout=180) as sock:  # a booting worker
         sock.sendall(f"GET {target} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n".encode())
         chunks = []
         while chunk := sock.recv(65536):
