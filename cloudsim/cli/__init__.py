@@ -16,6 +16,7 @@ from cloudsim.errors import CloudSimError
 from cloudsim.limits import INT32_MAX
 
 if TYPE_CHECKING:
+    import sqlalchemy.exc
     from flask import Flask
 
 # Flask, the models and the config load when a command runs, never for `cloudsim --help`.
@@ -69,14 +70,40 @@ def reports_errors(fn: F) -> F:
 
     @wraps(fn)
     def wrapped(*args: Any, **kwargs: Any) -> Any:
+        from sqlalchemy.exc import OperationalError
+
         from cloudsim.config import ConfigError
 
         try:
+            for name, value in kwargs.items():
+                _check_text(name, value)
             return fn(*args, **kwargs)
         except (CloudSimError, ConfigError) as exc:
             raise click.ClickException(str(exc)) from None
+        except OperationalError as exc:
+            # e.g. "no such table" before `cloudsim db upgrade` made the schema
+            raise click.ClickException(_database_problem(exc)) from None
 
     return cast(F, wrapped)
+
+
+def _check_text(name: str, value: Any) -> None:
+    """Refuse an argument that is not UTF-8 (click keeps such bytes as lone surrogates)."""
+    values = value if isinstance(value, tuple | list) else (value,)
+    for item in values:
+        if isinstance(item, str):
+            try:
+                item.encode("utf-8")
+            except UnicodeEncodeError:
+                option = name.replace("_", "-").upper()
+                raise click.ClickException(f"{option} is not UTF-8 text") from None
+
+
+def _database_problem(exc: sqlalchemy.exc.OperationalError) -> str:
+    text = str(exc.orig).splitlines()[0] if exc.orig is not None else str(exc).splitlines()[0]
+    if "no such table" in text or "does not exist" in text:
+        return f"the database has no CloudSim tables yet ({text}): run `cloudsim db upgrade`"
+    return f"database error: {text}"
 
 
 def emit(data: Any, as_json: bool, text: str) -> None:

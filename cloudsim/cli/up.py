@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import sys
+from pathlib import Path
 
 import click
 from sqlalchemy import select
@@ -20,6 +21,9 @@ from cloudsim.models import Constellation, ConstellationState, Team
 from cloudsim.people.service import create_team, ensure_first_admin
 from cloudsim.runtime.redis_server import redis_command
 from cloudsim.runtime.supervisor import Service, Supervisor, port_open
+
+# sun_path holds 108 bytes with its final NUL
+MAX_SOCKET_PATH = 107
 
 
 def _host_port(bind: str) -> tuple[str, int]:
@@ -107,8 +111,10 @@ def _services(config: Config) -> list[tuple[Service, float]]:
                     # Threads, not one process per connection: a client's connection stays
                     # open between its requests (keep-alive) instead of a new TCP connection
                     # and accept per request; CPU work is still spread over the processes.
+                    # gthread, whose own error answers (414, 400) carry security headers
                     "--worker-class",
-                    "gthread",
+                    "cloudsim.web.gunicorn_worker.SecureThreadWorker",
+                    *_control_socket(config.instance_dir),
                     "--workers",
                     str(config.web_workers),
                     "--threads",
@@ -127,6 +133,15 @@ def _services(config: Config) -> list[tuple[Service, float]]:
         )
     )
     return services
+
+
+def _control_socket(instance_dir: Path) -> list[str]:
+    """Return gunicorn's control socket option: in the instance folder, so that two CloudSims
+    on one machine never share (and delete) one; none where the path is too long for a socket."""
+    path = instance_dir / "gunicorn.ctl"
+    if len(os.fsencode(path)) > MAX_SOCKET_PATH:
+        return ["--no-control-socket"]
+    return ["--control-socket", str(path)]
 
 
 DEMO_TEAM = "Demo team"

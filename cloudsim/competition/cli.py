@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
 from drcsim.worlds import WORLD_NAMES
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import ID, app_context, emit, reports_errors
+from cloudsim.cli.files import LoadedText, TextFile
 from cloudsim.competition import runs as run_service
 from cloudsim.competition import schedule, season
 from cloudsim.extensions import db
@@ -138,13 +137,13 @@ def schedule_group() -> None:
 
 
 @schedule_group.command("import")
-@click.argument("path", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("path", type=TextFile())
 @reports_errors
-def import_command(path: Path) -> None:
+def import_command(path: LoadedText) -> None:
     """Schedule every task of a season file (tasks already there are kept)."""
     with app_context():
-        created = season.import_season(SYSTEM, path.read_text())
-        click.echo(f"imported {path}: {len(created)} new task(s)")
+        created = season.import_season(SYSTEM, path.text)
+        click.echo(f"imported {path.name}: {len(created)} new task(s)")
 
 
 @schedule_group.command("export")

@@ -105,6 +105,7 @@ def _ready(constellation_id: int) -> bool:
         ConstellationState.ERROR,
         ConstellationState.TERMINATING,
         ConstellationState.TERMINATED,
+        ConstellationState.TERMINATE_INCOMPLETE,
     ):
         state = constellation.state.value if constellation else "gone"
         raise RunError(f"the demo constellation is {state}")

@@ -41,6 +41,7 @@ from cloudsim.competition.schedule import (
     visible_tasks,
     zone,
 )
+from cloudsim.documents import BoundedLoader, load_document
 from cloudsim.errors import InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Role, Task, Team
@@ -64,7 +65,7 @@ TASK_KEYS = {
 }
 
 
-class SeasonLoader(yaml.SafeLoader):
+class SeasonLoader(BoundedLoader):
     """YAML's safe loader that keeps times as the text they are (the task's zone gives their
     meaning); YAML's own timestamps lose the zone, turn a date-only value into a date, and
     raise on 2026-02-30."""
@@ -78,13 +79,9 @@ SeasonLoader.yaml_implicit_resolvers = {
 
 def parse_season(text: str) -> tuple[list[tuple[TaskSpec, list[str] | None]], str]:
     """Read a season document into (spec, team names or None for all) pairs and its zone."""
-    try:
-        document = yaml.load(text, Loader=SeasonLoader)  # noqa: S506 (a SafeLoader)
-    except yaml.YAMLError as exc:
-        raise InvalidInput(f"the schedule is not valid YAML: {exc}") from None
-    except (ValueError, OverflowError, RecursionError) as exc:
-        # PyYAML's constructors raise these for 2026-02-30, 5,000-digit numbers, deep nesting.
-        raise InvalidInput(f"the schedule holds a value YAML cannot read: {exc}") from None
+    document = load_document(
+        text, "the schedule", loader=SeasonLoader, not_parsed="{what} is not valid YAML"
+    )
     if not isinstance(document, dict) or not isinstance(document.get("tasks"), list):
         raise InvalidInput("the schedule must be a mapping with a 'tasks' list")
     unknown = set(document) - {"time_zone", "teams", "tasks"}

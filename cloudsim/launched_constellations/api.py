@@ -86,7 +86,8 @@ class ConstellationById(MethodView):
 class Retry(MethodView):
     @blp.response(202, JobSchema)
     def post(self, ref: int) -> Any:
-        """Launch again a constellation in error, resuming what exists (admins)."""
+        """Launch again a constellation in error, resuming what exists, or terminate again
+        one in terminate_incomplete, cleaning the machines left (admins)."""
         return service.retry(caller(), ref)
 
 

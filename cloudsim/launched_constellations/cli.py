@@ -16,7 +16,11 @@ from cloudsim.launched_constellations import service
 from cloudsim.launched_constellations.capacity import describe, room
 from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair
-from cloudsim.launched_constellations.reconcile import destroy_orphans, find_orphans
+from cloudsim.launched_constellations.reconcile import (
+    destroy_orphans,
+    find_orphans,
+    incomplete_terminations,
+)
 from cloudsim.models import Constellation, Job
 from cloudsim.people.service import find_team
 from cloudsim.providers.service import PROVIDERS
@@ -211,15 +215,31 @@ def terminate(name: str, wait: bool, as_json: bool) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @reports_errors
 def orphans(destroy: bool, as_json: bool) -> None:
-    """List provider nodes that no live constellation owns; --destroy removes them."""
+    """List provider nodes that no live constellation owns, and terminates left incomplete;
+    --destroy removes the nodes (an incomplete terminate is retried with `terminate`)."""
     with app_context() as app:
         config = app.config["CLOUDSIM"]
         found = destroy_orphans(SYSTEM, config) if destroy else find_orphans(config)
+        incomplete = incomplete_terminations()
         verb = "destroyed" if destroy else "orphan"
-        lines = "\n".join(
-            f"{verb}: {o.provider} {o.name} ({o.node_id}) of {o.constellation}" for o in found
-        )
-        emit([o.__dict__ for o in found], as_json, lines or "no orphan nodes")
+        lines = [f"{verb}: {o.provider} {o.name} ({o.node_id}) of {o.constellation}" for o in found]
+        lines += [
+            f"terminate incomplete: {c.provider} {c.name}: {c.error} "
+            f"(retry: cloudsim constellation terminate {c.name})"
+            for c in incomplete
+        ]
+        data: list[dict[str, object]] = [o.__dict__ for o in found]
+        data += [
+            {
+                "provider": c.provider,
+                "node_id": None,
+                "name": c.name,
+                "constellation": c.name,
+                "terminate_incomplete": c.error,
+            }
+            for c in incomplete
+        ]
+        emit(data, as_json, "\n".join(lines) or "no orphan nodes")
 
 
 @constellation.command("ssh", context_settings={"ignore_unknown_options": True})

@@ -11,7 +11,8 @@ from sqlalchemy import select, update
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.keys import KeyPair
-from cloudsim.models import Constellation, ConstellationState, Machine
+from cloudsim.models import Constellation, Machine
+from cloudsim.models.machines import GONE
 from cloudsim.providers.service import Provider, open_provider
 from provisioners.providers.base import BEHIND_PUBLIC_MACHINE
 from provisioners.remote.ssh import ConnectionCache, HostKeys, Route, SSHTarget, process_cache
@@ -90,7 +91,7 @@ def forget_connections(constellation: Constellation, cache: ConnectionCache | No
 
 def forget_gone_connections(cache: ConnectionCache) -> int:
     """Close kept connections to machines of constellations terminated (by any process)."""
-    gone = (ConstellationState.TERMINATING, ConstellationState.TERMINATED)
+    gone = GONE
     live = set(
         db.session.scalars(select(Constellation.name).where(Constellation.state.not_in(gone)))
     )

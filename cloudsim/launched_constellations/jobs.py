@@ -26,6 +26,7 @@ from cloudsim.launched_constellations.connect import (
     forget_connections,
     machine_host_keys,
     record_routes,
+    target_name,
     targets,
 )
 from cloudsim.launched_constellations.keys import (
@@ -37,6 +38,7 @@ from cloudsim.launched_constellations.service import launched_kind
 from cloudsim.launched_constellations.software import Supply, preinstall, supply_needs
 from cloudsim.launched_constellations.verify import verify_constellation
 from cloudsim.models import Constellation, ConstellationState, Secret
+from cloudsim.models.machines import GONE
 from cloudsim.providers.service import Provider, open_provider
 from constellations.definition import ConstellationKind
 from constellations.plans import (
@@ -63,7 +65,7 @@ class ProvisioningError(CloudSimError):
 def launch_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     """Bring a constellation to `ready`, or to `error` with the reason."""
     constellation = ctx.load(Constellation, job.constellation_id)
-    if constellation.state in (ConstellationState.TERMINATING, ConstellationState.TERMINATED):
+    if constellation.state in GONE:
         raise ProvisioningError(f"{constellation.name} is {constellation.state.value}")
     config: Config = current_app.config["CLOUDSIM"]
     kind = launched_kind(constellation)
@@ -278,18 +280,27 @@ def _in_parallel(
     items: Sequence[Any], fn: Callable[[Any], T], key: Callable[[Any], str]
 ) -> dict[str, T]:
     """Call fn on every item in threads; raise one error naming every failure."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    if not items:
-        return {}
-    with ThreadPoolExecutor(max_workers=len(items)) as pool:
-        futures = {key(item): pool.submit(fn, item) for item in items}
-    failures = {name: f.exception() for name, f in futures.items() if f.exception()}
+    results, failures = _outcomes(items, fn, key)
     if failures:
         raise ProvisioningError(
             "; ".join(f"{name}: {error}" for name, error in sorted(failures.items()))
         )
-    return {name: f.result() for name, f in futures.items()}
+    return results
+
+
+def _outcomes(
+    items: Sequence[Any], fn: Callable[[Any], T], key: Callable[[Any], str]
+) -> tuple[dict[str, T], dict[str, str]]:
+    """Call fn on every item in threads; return the results and each failure's message."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    if not items:
+        return {}, {}
+    with ThreadPoolExecutor(max_workers=len(items)) as pool:
+        futures = {key(item): pool.submit(fn, item) for item in items}
+    failures = {name: str(f.exception()) for name, f in futures.items() if f.exception()}
+    results = {name: f.result() for name, f in futures.items() if name not in failures}
+    return results, failures
 
 
 def _plan_context(
@@ -329,7 +340,11 @@ def _deploy(
 
 @job_kind("constellation.terminate", payload=ConstellationJob)
 def terminate_constellation(ctx: JobContext, job: ConstellationJob) -> None:
-    """Release every resource of a constellation; safe to run again and again."""
+    """Release every resource of a constellation; safe to run again and again.
+
+    A machine that cannot be cleaned keeps the constellation `terminate_incomplete`, with
+    its key, network and routes, so that terminating again (the retry) can still reach it.
+    """
     constellation = ctx.load(Constellation, job.constellation_id)
     config: Config = current_app.config["CLOUDSIM"]
     lifecycle.terminating(constellation)
@@ -338,8 +353,13 @@ def terminate_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     provider = open_provider(constellation.provider, config)
     driver = provider.driver
     nodes = provider.nodes(constellation.name)
-    ctx.checkpoint()
-    _in_parallel(nodes, lambda node: driver.destroy_node(node), lambda node: node.name)
+    not_cleaned = _destroy_machines(ctx, constellation, provider, nodes, config)
+    forget_connections(constellation)
+    if not_cleaned:
+        reason = "; ".join(f"{name}: {why}" for name, why in sorted(not_cleaned.items()))
+        lifecycle.terminate_incomplete(constellation, ctx.masked(reason))
+        ctx.checkpoint()  # the incomplete state survives the runner's rollback
+        raise ProvisioningError(f"terminate incomplete: {ctx.masked(reason)}")
     ctx.log(f"destroyed {len(nodes)} machine(s)")
     ctx.stage("network", 70)
     network = {n.name: n for n in driver.ex_list_networks()}.get(constellation.name)
@@ -352,3 +372,52 @@ def terminate_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     ).delete()
     lifecycle.terminated(constellation)
     ctx.stage("terminated", 100)
+
+
+def _destroy_machines(
+    ctx: JobContext,
+    constellation: Constellation,
+    provider: Provider,
+    nodes: list[Node],
+    config: Config,
+) -> dict[str, str]:
+    """Destroy the nodes, each cleaned through the route a launch uses; return machine -> why
+    it is not destroyed.
+
+    Machines reached through another (behind the router) go first: the router goes only once
+    they are clean, since cleaning it closes the way to them.
+    """
+    if not nodes:
+        return {}
+    keys = constellation_keypair(constellation)
+    reach = targets(constellation, keys, config)
+    jumps = {t.jump.name for t in reach.values() if t.jump is not None}
+
+    def machine(node: Node) -> str:
+        return str(node.extra.get("tags", {}).get("cloudsim:machine", node.name))
+
+    behind = [n for n in nodes if target_name(constellation, machine(n)) not in jumps]
+    gateways = [n for n in nodes if target_name(constellation, machine(n)) in jumps]
+    host_keys = machine_host_keys(constellation)
+    ctx.checkpoint()  # the machines' threads record host keys and log lines meanwhile
+    executor = SSHExecutor(
+        host_keys,
+        log_sink=ctx.line_sink(),
+        secrets=[keys.private],
+        connect_policy=ConnectPolicy(deadline=60, attempt_timeout=10),
+    )
+    driver = provider.driver
+
+    def destroy(node: Node) -> bool:
+        target = reach.get(machine(node))
+        if target is None:
+            return bool(driver.destroy_node(node))
+        return bool(driver.ex_destroy_node_through(node, executor, target))
+
+    with executor:
+        _, failures = _outcomes(behind, destroy, machine)
+        if failures:
+            kept = "kept, so that the retry reaches the others through it"
+            return {**failures, **{machine(node): kept for node in gateways}}
+        _, failures = _outcomes(gateways, destroy, machine)
+    return failures

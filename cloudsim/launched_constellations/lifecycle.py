@@ -2,7 +2,8 @@
 each change starts are enqueued.
 
 pending -> launching -> ready | error; error -> pending (retry); any -> terminating ->
-terminated. The service checks who may ask and what is allowed; the job bodies do the work;
+terminated | terminate_incomplete (a machine not cleaned); terminate_incomplete -> terminating
+(retry). The service checks who may ask and what is allowed; the job bodies do the work;
 both call here to move the state.
 """
 
@@ -14,6 +15,9 @@ from cloudsim.auth.policy import Actor
 from cloudsim.jobs.runner import Payload
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Constellation, ConstellationState, Job, Machine, MachineState
+
+# The error of a constellation whose terminate is incomplete starts with this.
+TERMINATE_INCOMPLETE = "terminate incomplete: "
 
 
 @dataclass(frozen=True)
@@ -89,8 +93,16 @@ def terminating(constellation: Constellation) -> None:
         machine.state = MachineState.TERMINATING
 
 
+def terminate_incomplete(constellation: Constellation, reason: str) -> None:
+    """Mark a constellation whose terminate left a machine not cleaned, with which and why."""
+    constellation.state = ConstellationState.TERMINATE_INCOMPLETE
+    constellation.error = f"{TERMINATE_INCOMPLETE}{reason}"
+
+
 def terminated(constellation: Constellation) -> None:
     """Mark a constellation and all its machines terminated."""
     for machine in constellation.machines:
         machine.state = MachineState.TERMINATED
     constellation.state = ConstellationState.TERMINATED
+    if constellation.error and constellation.error.startswith(TERMINATE_INCOMPLETE):
+        constellation.error = None  # the retry cleaned what the earlier terminate could not

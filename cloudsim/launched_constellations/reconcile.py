@@ -69,6 +69,17 @@ def find_orphans(config: Config) -> list[Orphan]:
     return [orphan for orphan, _ in _orphan_nodes(config)]
 
 
+def incomplete_terminations() -> list[Constellation]:
+    """Return the constellations whose terminate left a machine not cleaned (to retry)."""
+    return list(
+        db.session.scalars(
+            select(Constellation)
+            .where(Constellation.state == ConstellationState.TERMINATE_INCOMPLETE)
+            .order_by(Constellation.name)
+        )
+    )
+
+
 def destroy_orphans(actor: Actor, config: Config) -> list[Orphan]:
     """Destroy every orphan node; return what was destroyed."""
     orphans = _orphan_nodes(config)

@@ -127,9 +127,12 @@ def launch(
 
 
 def retry(actor: Actor, ref: int | str) -> Job:
-    """Launch again a constellation that ended in error (resuming what exists)."""
+    """Launch again a constellation that ended in error (resuming what exists), or terminate
+    again one whose terminate left a machine not cleaned."""
     require_role(actor, Role.ADMIN, "retry launches")
     constellation = get_constellation(actor, ref)
+    if constellation.state == ConstellationState.TERMINATE_INCOMPLETE:
+        return terminate(actor, ref)
     if constellation.state != ConstellationState.ERROR:
         raise Conflict(f"{constellation.name} is {constellation.state.value}, not in error")
     _audit("constellation.retry", actor, constellation)

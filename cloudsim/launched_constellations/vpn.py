@@ -16,7 +16,8 @@ from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.access import field_computers, refresh_team_access, ssh_config
 from cloudsim.launched_constellations.keys import constellation_secret
-from cloudsim.models import Constellation, ConstellationState, Role, Secret, SecretKind, User
+from cloudsim.models import Constellation, Role, Secret, SecretKind, User
+from cloudsim.models.machines import GONE
 from constellations.plans.base import VpnMaterial
 from constellations.plans.roles import TEAM_USER
 from constellations.plans.router import VPN_SERVER_NAME
@@ -264,7 +265,7 @@ def vpn_bundle(
             f"{constellation.name} is a {constellation.kind} constellation: "
             "only vrc constellations have a team VPN"
         )
-    if constellation.state in (ConstellationState.TERMINATING, ConstellationState.TERMINATED):
+    if constellation.state in GONE:
         raise Conflict(f"{constellation.name} is {constellation.state.value}")
     remote_host = _router_address(constellation)  # before a certificate is issued
     client = client_certificate(constellation, user)

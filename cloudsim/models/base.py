@@ -47,12 +47,12 @@ class Base(DeclarativeBase):
     metadata = MetaData(naming_convention=NAMING)
 
 
-def str_enum(enum_cls: type[Any]) -> Enum:
+def str_enum(enum_cls: type[Any], length: int = 16) -> Enum:
     """Store a str Enum by value in a VARCHAR (portable; no native enum type to migrate)."""
     return Enum(
         enum_cls,
         native_enum=False,
         create_constraint=False,
-        length=16,
+        length=length,
         values_callable=lambda members: [m.value for m in members],
     )

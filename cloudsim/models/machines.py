@@ -24,6 +24,16 @@ class ConstellationState(enum.StrEnum):
     ERROR = "error"
     TERMINATING = "terminating"
     TERMINATED = "terminated"
+    # a terminate left a machine not cleaned (the error says which and why); retry it
+    TERMINATE_INCOMPLETE = "terminate_incomplete"
+
+
+# The states of a constellation on its way out, or out: no job starts work on its machines.
+GONE = (
+    ConstellationState.TERMINATING,
+    ConstellationState.TERMINATED,
+    ConstellationState.TERMINATE_INCOMPLETE,
+)
 
 
 class MachineState(enum.StrEnum):
@@ -68,7 +78,7 @@ class Constellation(Base):
     provider: Mapped[str] = mapped_column(String(32))
     team_id: Mapped[int | None] = mapped_column(ForeignKey("teams.id"), index=True)
     state: Mapped[ConstellationState] = mapped_column(
-        str_enum(ConstellationState), default=ConstellationState.PENDING
+        str_enum(ConstellationState, length=24), default=ConstellationState.PENDING
     )
     error: Mapped[str | None] = mapped_column(Text)
     # Provider-side identifiers (network id, security groups, ...) needed to clean up.

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import sys
-from typing import TextIO
 
 import click
 
 from cloudsim.auth import ssh_keys
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import ID, app_context, emit, reports_errors
+from cloudsim.cli.files import LoadedText, TextFile
 from cloudsim.errors import InvalidInput
 from cloudsim.models import Role, SshKey, Team, User
 from cloudsim.people import service
@@ -178,13 +178,13 @@ def _key_data(key: SshKey) -> dict[str, object]:
 
 @ssh_key.command("add")
 @click.argument("email")
-@click.argument("key_file", type=click.File("r"), required=False)
+@click.argument("key_file", type=TextFile(), required=False)
 @click.option("--generate", is_flag=True, help="Make an ed25519 key; print its private key once.")
 @click.option("--name", default="", help="A name for the key.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @reports_errors
 def add_ssh_key(
-    email: str, key_file: TextIO | None, generate: bool, name: str, as_json: bool
+    email: str, key_file: LoadedText | None, generate: bool, name: str, as_json: bool
 ) -> None:
     """Add a public key (KEY_FILE, '-' for standard input) for EMAIL, or --generate one."""
     with app_context():

@@ -17,7 +17,16 @@ from cloudsim.auth.session import end_sessions
 from cloudsim.auth.tokens import revoke_all_tokens
 from cloudsim.errors import Conflict, Forbidden, InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.models import ConstellationState, Role, Team, User
+from cloudsim.models import (
+    Constellation,
+    ConstellationState,
+    Job,
+    Role,
+    Run,
+    Team,
+    TeamInstance,
+    User,
+)
 from cloudsim.people.access import revoke_before_delete, revoke_team_access
 from cloudsim.web.inputs import as_id
 
@@ -156,9 +165,31 @@ def delete_team(actor: Actor, team_id: int) -> None:
     live = [c for c in team.constellations if c.state != ConstellationState.TERMINATED]
     if live:
         raise Conflict(f"team {team.name!r} still has constellation {live[0].name!r}")
+    history = _team_history(team.id)
+    if history:
+        raise Conflict(
+            f"team {team.name!r} has a history ({', '.join(history)}) that deleting it would "
+            "lose: it stays, without members"
+        )
     record("team.delete", actor, target_type="team", target_id=team.id, name=team.name)
     db.session.delete(team)
     db.session.flush()
+
+
+def _team_history(team_id: int) -> list[str]:
+    """Return what the team has done ("2 run(s)", ...): its runs, constellations, jobs."""
+    counted = (
+        ("run(s)", Run.team_id),
+        ("constellation(s)", Constellation.team_id),
+        ("team instance(s)", TeamInstance.team_id),
+        ("job(s)", Job.team_id),
+    )
+    found = []
+    for label, column in counted:
+        count = db.session.scalar(select(func.count()).where(column == team_id)) or 0
+        if count:
+            found.append(f"{count} {label}")
+    return found
 
 
 # Users -----------------------------------------------------------------------------------

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import sys
-from typing import TextIO
 
 import click
 
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, emit, reports_errors
+from cloudsim.cli.files import LoadedText, TextFile
 from cloudsim.errors import CloudSimError, InvalidInput
 from cloudsim.providers.service import (
     PROVIDERS,
@@ -88,14 +88,14 @@ def configure_ec2(
     "--inventory",
     "inventory_file",
     required=True,
-    type=click.File("r"),
+    type=TextFile(),
     help="YAML list of servers (name, address, private_ip, network, cidr, "
     "private_key, ...); see provisioners/providers/servers/README.md.",
 )
 @reports_errors
-def configure_servers(inventory_file: TextIO) -> None:
+def configure_servers(inventory_file: LoadedText) -> None:
     """Existing machines reachable by SSH (e.g. bare-metal servers), from an inventory file."""
-    inventory = servers_settings(inventory_file, inventory_file.name)["inventory"]
+    inventory = servers_settings(inventory_file.text, inventory_file.name)["inventory"]
     if not isinstance(inventory, list):
         raise click.ClickException(f"{inventory_file.name}: expected a list of servers")
     with app_context():

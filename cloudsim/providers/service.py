@@ -10,13 +10,13 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import IO, Any, cast
+from typing import Any, cast
 
-import yaml
 from libcloud.compute.base import Node, NodeImage, NodeSize
 from sqlalchemy import select
 
 from cloudsim.config import Config
+from cloudsim.documents import load_document
 from cloudsim.errors import InvalidInput
 from cloudsim.extensions import db
 from cloudsim.models import Secret, SecretKind, utcnow
@@ -104,12 +104,9 @@ def provider_settings(name: str) -> dict[str, Any]:
     return cast(dict[str, Any], json.loads(secret.value))
 
 
-def servers_settings(inventory: str | IO[str], where: str) -> dict[str, Any]:
+def servers_settings(inventory: str | bytes, where: str) -> dict[str, Any]:
     """Return the servers provider's settings from an inventory's YAML; refuse what is not YAML."""
-    try:
-        return {"inventory": yaml.safe_load(inventory)}
-    except yaml.YAMLError as exc:
-        raise InvalidInput(f"{where}: not YAML: {exc}") from None
+    return {"inventory": load_document(inventory, where, not_parsed="{what}: not YAML")}
 
 
 def ec2_settings(

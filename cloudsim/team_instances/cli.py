@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import TextIO
 
 import click
 from flask import current_app
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, commit, emit, reports_errors
+from cloudsim.cli.files import LoadedText, TextFile
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.cli import follow_job
 from cloudsim.models import TeamInstance
@@ -139,13 +139,13 @@ def terminate(name: str, as_json: bool) -> None:
     "--inventory",
     "inventory_file",
     required=True,
-    type=click.File("r"),
+    type=TextFile(),
     help="The YAML inventory of the machines this instance launches on.",
 )
 @reports_errors
-def provider(name: str, provider: str, inventory_file: TextIO) -> None:
+def provider(name: str, provider: str, inventory_file: LoadedText) -> None:
     """Keep (encrypted) the provider settings handed to instance NAME when it launches."""
-    settings = servers_settings(inventory_file, inventory_file.name)
+    settings = servers_settings(inventory_file.text, inventory_file.name)
     with app_context():
         found = launches.set_provider_settings(SYSTEM, name, provider, settings)
         click.echo(f"{found.name}: {provider} settings kept (encrypted), handed over at launch")

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import click
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, emit, reports_errors
-from cloudsim.errors import InvalidInput
+from cloudsim.cli.files import LoadedText, TextFile
 from cloudsim.models import World
 from cloudsim.worlds import service
 
@@ -54,17 +53,13 @@ def show(name: str) -> None:
 
 
 @world.command("update")
-@click.argument("path", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("path", type=TextFile(service.MAX_DOCUMENT_BYTES))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @reports_errors
-def update(path: Path, as_json: bool) -> None:
+def update(path: LoadedText, as_json: bool) -> None:
     """Replace a world's document with the one in PATH (JSON or YAML); checked first."""
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InvalidInput(f"cannot read {path}: {exc}") from None
     with app_context():
-        done = service.update_world(SYSTEM, service.parse_document(text))
+        done = service.update_world(SYSTEM, service.parse_document(path.text))
         what = "updated" if done.changed else "unchanged"
         emit(
             world_data(done.world) | {"changed": done.changed},

@@ -7,17 +7,16 @@ and propagates them to its team instances. Getters never commit; the caller does
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from typing import Any
 
-import yaml
 from drcsim.errors import WorldError
 from drcsim.worlds import WorldSummary, check_document, document_digest, summarise
 from sqlalchemy import select
 
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import Actor, require_role
+from cloudsim.documents import as_json_data, check_depth, load_document
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Role, Task, World, utcnow
@@ -68,22 +67,16 @@ def world_for_run(name: str, config: int) -> World:
     return _row(name)
 
 
-def parse_document(text: str) -> Any:
+def parse_document(text: str | bytes) -> Any:
     """Return the data of an uploaded world file (JSON, or YAML, which JSON is a subset of)."""
-    if len(text.encode()) > MAX_DOCUMENT_BYTES:
-        raise InvalidInput(f"a world document is at most {MAX_DOCUMENT_BYTES // 1024} KiB")
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise InvalidInput(f"not JSON or YAML: {str(exc).splitlines()[0]}") from None
+    return load_document(text, "the world document", max_bytes=MAX_DOCUMENT_BYTES)
 
 
 def checked(data: Any) -> dict[str, Any]:
     """Return a world document drcsim accepts (and that JSON can carry), or raise InvalidInput."""
+    check_depth(data, "the world document")  # an API body is bounded too, but not this deep
     try:
-        document = check_document(json.loads(json.dumps(data)))
-    except (TypeError, ValueError) as exc:  # YAML dates, sets and the like
-        raise InvalidInput(f"not a JSON document: {exc}") from None
+        document = check_document(as_json_data(data, "the world document"))
     except WorldError as exc:
         raise InvalidInput(f"invalid world: {exc}") from None
     return document

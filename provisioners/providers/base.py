@@ -132,6 +132,15 @@ class CloudSimNodeDriver(NodeDriver):  # type: ignore[misc]
         """Return argv wrapped to run on "the internet", None: there is no such place to run."""
         return None
 
+    def ex_destroy_node_through(self, node: Node, executor: Any, target: Any) -> bool:
+        """Destroy node, cleaning it through the caller's SSH route where the provider cleans
+        machines (executor: an SSHExecutor, target: the SSHTarget a launch uses).
+
+        Providers whose machines vanish with the node (clouds, local hosts) ignore the route.
+        A provider that cannot clean the machine raises and keeps it: a retry finds it again.
+        """
+        return bool(self.destroy_node(node))
+
     def ex_ssh_route(self, node: Node) -> Route:
         """Return how the controller reaches node: a public address, else through a jump host."""
         if node.public_ips:

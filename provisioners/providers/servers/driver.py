@@ -35,6 +35,7 @@ from provisioners.providers.servers.errors import (
     InvalidRequestError,
     NetworkInUseError,
     NetworkNotFoundError,
+    ServerCleanupError,
     ServerSetupError,
     ServersProviderError,
 )
@@ -50,11 +51,21 @@ from provisioners.providers.servers.state import (
     ServerClaim,
     StateFile,
 )
-from provisioners.remote.ssh import ConnectPolicy, HostKeys, Route, SSHError, SSHExecutor
+from provisioners.remote.ssh import (
+    CommandFailed,
+    ConnectPolicy,
+    HostKeys,
+    Route,
+    SSHError,
+    SSHExecutor,
+    SSHTarget,
+)
 
 EXISTING = "existing"
 LOCATION_ID = "servers"
 DEFAULT_CONNECT_TIMEOUT_SECONDS = 60.0
+# A probe that never connects: what "the internet" gets at a private address.
+UNROUTABLE = ("false",)
 log = logging.getLogger(__name__)
 
 
@@ -261,6 +272,45 @@ class ServersNodeDriver(CloudSimNodeDriver):
                 )
         return True
 
+    def ex_destroy_node_through(self, node: Node, executor: SSHExecutor, target: SSHTarget) -> bool:
+        """Clean the node's server through target (the route its launch used, e.g. through the
+        router), else directly with the inventory's login; free the server only once clean.
+
+        A server cleaned neither way stays claimed by the node and ServerCleanupError says
+        why: the node is listed again, so a retry (through the same route) finds it.
+        """
+        claim = self._state.read().claim_of_node(node.name)
+        if claim is None or (node.id and str(node.id) != claim.server):
+            return True
+        pending = self._state.read().pending_cleanups.get(claim.server)
+        keys = sorted({claim.public_key, *(pending.public_keys if pending else [])})
+        server = self.inventory.server(claim.server)
+        if server is None:
+            raise ServerCleanupError(
+                f"server {claim.server} is no longer in the inventory: put it back to clean it"
+            )
+        try:
+            remote.clean_up(executor, server, keys, via=target)
+        except CommandFailed as error:
+            # reached, and the cleanup itself failed: its own address would fail the same way
+            raise ServerCleanupError(f"server {server.name} is not cleaned up: {error}") from error
+        except SSHError as through:
+            log.warning("server %s: not reached through %s: %s", server.name, target.name, through)
+            try:
+                with self._executor(server) as direct:
+                    remote.clean_up(direct, server, keys)
+            except SSHError as error:
+                raise ServerCleanupError(
+                    f"server {server.name} is not cleaned up: through {target.name}: {through}; "
+                    f"at its own address {server.address}: {error}"
+                ) from error
+        with self._state.transaction() as state:
+            current = state.claims.get(claim.server)
+            if current is not None and current.node == node.name:
+                del state.claims[claim.server]
+            state.pending_cleanups.pop(claim.server, None)
+        return True
+
     def ex_clean_up_released(self) -> dict[str, str]:
         """Retry the cleanup of free servers released without one; return those still pending."""
         pending = self._state.read().pending_cleanups
@@ -298,8 +348,21 @@ class ServersNodeDriver(CloudSimNodeDriver):
         return [server_status(server, state) for server in self.inventory.servers]
 
     def ex_ssh_route(self, node: Node) -> Route:
-        """Return the way to the node's server the inventory gives (address, login, proxy)."""
+        """Return the way to the node's server once its constellation's firewall is up.
+
+        A server without a public address is reached as a cloud's private machine is: through
+        the constellation's public machine, at its LAN address (a kind may seal it, e.g. vrc's
+        sim takes SSH from the router only). The inventory's own way in (address, proxy)
+        serves to claim and prepare the server, before that firewall.
+        """
         server = self._server(str(node.id))
+        if server.public_ip is None:
+            return Route(
+                host=node.private_ips[0],
+                user=server.user,
+                port=server.port,
+                jump=BEHIND_PUBLIC_MACHINE,
+            )
         if server.proxy_command:
             return Route(
                 host=node.private_ips[0],
@@ -307,17 +370,20 @@ class ServersNodeDriver(CloudSimNodeDriver):
                 port=server.port,
                 proxy_command=tuple(server.proxy_command),
             )
-        if server.public_ip is None:
-            # A kind that seals its private machines (vrc: sim's SSH from the router only)
-            # is reached as a cloud's private machines are: through its public machine, at
-            # the LAN address; the address is what the claim used, before the firewall.
-            return Route(
-                host=node.private_ips[0],
-                user=server.user,
-                port=server.port,
-                jump=BEHIND_PUBLIC_MACHINE,
-            )
         return Route(host=server.address, user=server.user, port=server.port)
+
+    def ex_public_proxy_command(self, ip: str, port: int) -> list[str] | None:
+        """Return how "the internet" reaches ip:port: a server's public address through the
+        inventory's proxy to it, an inventory server's private address not at all (the
+        internet has no route to it, whatever the controller's own way in); None: from here."""
+        for server in self.inventory.servers:
+            if ip == server.public_ip and server.proxy_command and port == server.port:
+                return list(server.proxy_command)
+        public = {server.public_ip for server in self.inventory.servers}
+        private = {server.private_ip for server in self.inventory.servers}
+        if ip in private and ip not in public and ipaddress.ip_address(ip).is_private:
+            return list(UNROUTABLE)
+        return None
 
     def list_sizes(self, location: NodeLocation | None = None) -> list[NodeSize]:
         """Return the single size: whatever the server has."""

@@ -33,3 +33,7 @@ class StateError(ServersProviderError, errors.StateError):
 
 class ServerSetupError(ServersProviderError):
     """Preparing a claimed server over SSH failed; the claim stays, marked failed."""
+
+
+class ServerCleanupError(ServersProviderError):
+    """Cleaning a server up failed on every way in; the server stays claimed by its node."""

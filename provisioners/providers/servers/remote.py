@@ -245,16 +245,26 @@ def prepare(
     run(executor, server, prepare_script(server, hostname, public_key, stale_keys))
 
 
-def clean_up(executor: SSHExecutor, server: Server, public_keys: Sequence[str]) -> None:
-    """Remove what CloudSim put on the server and give it back its own state and name."""
-    rules = parse_rule_listing(run(executor, server, list_rules_script()))
-    run(executor, server, cleanup_script(server, public_keys, rules))
+def clean_up(
+    executor: SSHExecutor,
+    server: Server,
+    public_keys: Sequence[str],
+    via: SSHTarget | None = None,
+) -> None:
+    """Remove what CloudSim put on the server and give it back its own state and name.
+
+    via: the way in to use instead of the inventory's (a constellation's route through its
+    router, when the constellation's firewall closes the server's own address).
+    """
+    rules = parse_rule_listing(run(executor, server, list_rules_script(), via))
+    run(executor, server, cleanup_script(server, public_keys, rules), via)
 
 
-def run(executor: SSHExecutor, server: Server, script: str) -> str:
+def run(executor: SSHExecutor, server: Server, script: str, via: SSHTarget | None = None) -> str:
     """Run a script as root (through sudo for another login user); return its stdout."""
+    way_in = via if via is not None else target(server)
     result = executor.run(
-        target(server), script, sudo=server.user != "root", timeout=COMMAND_TIMEOUT_SECONDS
+        way_in, script, sudo=way_in.user != "root", timeout=COMMAND_TIMEOUT_SECONDS
     )
     return result.stdout
 

@@ -4,7 +4,7 @@
   if (!box) return;
   const log = document.getElementById("job-log");
   if (log) log.scrollTop = log.scrollHeight;  // the newest lines matter most
-  const settled = ["ready", "error", "terminated"];
+  const settled = ["ready", "error", "terminated", "terminate_incomplete"];
   async function poll() {
     try {
       const response = await fetch(box.dataset.statusUrl, {credentials: "same-origin"});
