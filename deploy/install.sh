@@ -7,6 +7,18 @@ cd "$(dirname "$0")/.."
 python=${PYTHON:-python3}
 venv=.venv
 stamp=$venv/.install-stamp
+# One line per step on the terminal; what apt, npm and pip print goes to this file.
+log=.install.log
+
+logged() {
+    echo "--- $(date -u +%FT%TZ) $*" >>"$log"
+    if ! "$@" >>"$log" 2>&1; then
+        echo "install: failed: $*" >&2
+        echo "install: the last lines of $log:" >&2
+        tail -n 25 "$log" >&2
+        exit 1
+    fi
+}
 
 want_apt=$(grep -Ev '^\s*(#|$)' deploy/apt-packages.txt)
 missing=()
@@ -18,15 +30,15 @@ if [ ${#missing[@]} -gt 0 ]; then
         echo "install: missing Debian packages (${missing[*]}); run as root or install them" >&2
         exit 1
     fi
-    echo "install: apt-get install ${missing[*]}"
+    echo "install: Debian packages: ${missing[*]} (output: $log)"
     # Keep apt from starting redis, sshd, ... in this namespace: CloudSim starts its own.
     policy=/usr/sbin/policy-rc.d
     made_policy=0
     if [ ! -e "$policy" ]; then
         printf '#!/bin/sh\nexit 101\n' >"$policy" && chmod +x "$policy" && made_policy=1
     fi
-    apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+    logged apt-get update -qq
+    logged env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}"
     [ "$made_policy" = 1 ] && rm -f "$policy"
 fi
 
@@ -38,11 +50,12 @@ if [ ! -f "$vendor/.stamp" ] || [ "$(cat "$vendor/.stamp")" != "$npm_digest" ]; 
     if ! command -v npm >/dev/null; then
         # Debian's nodejs comes without npm (nodesource's carries it): add Debian's npm
         [ "$(id -u)" = 0 ] || { echo "install: npm is missing; install it (apt-get install npm)" >&2; exit 1; }
-        apt-get update -qq  # the package block above may not have run: no lists yet
-        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends npm >/dev/null
+        echo "install: Debian package npm (output: $log)"
+        logged apt-get update -qq  # the package block above may not have run: no lists yet
+        logged env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends npm
     fi
-    echo "install: npm ci (three.js)"
-    npm ci --no-audit --no-fund --ignore-scripts --loglevel=error
+    echo "install: three.js from the npm registry (output: $log)"
+    logged npm ci --no-audit --no-fund --ignore-scripts --loglevel=error
     mkdir -p "$vendor/three"
     cp node_modules/three/build/three.module.js node_modules/three/build/three.core.js \
         node_modules/three/examples/jsm/controls/OrbitControls.js node_modules/three/LICENSE \
@@ -61,10 +74,11 @@ digest=$(cat "${manifests[@]}" | sha256sum | cut -c1-16)
 if [ -x "$venv/bin/python" ] && [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$digest" ]; then
     exit 0
 fi
-echo "install: creating $venv and installing CloudSim"
-[ -x "$venv/bin/python" ] || "$python" -m venv "$venv"
-"$venv/bin/pip" install -q --upgrade pip
+echo "install: $venv with CloudSim and its Python packages (output: $log)"
+[ -x "$venv/bin/python" ] || logged "$python" -m venv "$venv"
+logged "$venv/bin/pip" install -q --upgrade pip
 targets=(-e ".[dev]")
 for sub in "${subprojects[@]}"; do targets+=(-e "./$sub"); done
-"$venv/bin/pip" install -q "${targets[@]}"
+logged "$venv/bin/pip" install -q "${targets[@]}"
 echo "$digest" >"$stamp"
+echo "install: done"

@@ -45,24 +45,16 @@ class LazyGroup(click.Group):
         return super().get_command(ctx, cmd_name)
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
-        helps: list[tuple[str, str | click.Command]] = []
+        shown: list[tuple[str, click.Command]] = []
         for name in self.list_commands(ctx):
             lazy = self.lazy_commands.get(name)
             if lazy is not None and name not in self.commands:
-                helps.append((name, lazy.help))
+                # a stand-in that only carries the help, so click shortens it as its own
+                shown.append((name, click.Command(name, help=lazy.help)))
             elif (command := self.get_command(ctx, name)) is not None and not command.hidden:
-                helps.append((name, command))
-        if not helps:
+                shown.append((name, command))
+        if not shown:
             return
-        limit = formatter.width - 6 - max(len(name) for name, _ in helps)
-        rows = [
-            (
-                name,
-                click.utils.make_default_short_help(help, limit)
-                if isinstance(help, str)
-                else help.get_short_help_str(limit),
-            )
-            for name, help in helps
-        ]
+        limit = formatter.width - 6 - max(len(name) for name, _ in shown)
         with formatter.section("Commands"):
-            formatter.write_dl(rows)
+            formatter.write_dl([(name, cmd.get_short_help_str(limit)) for name, cmd in shown])

@@ -189,22 +189,42 @@ def up(demo: bool) -> None:
         config: Config = app.config["CLOUDSIM"]
         migrate.upgrade(app)
         admin = ensure_first_admin(config.admin_email, config.admin_password)
-        if admin is not None:
-            click.echo(f"created the first admin: {admin.user.email}")
+        if admin is None:
+            credentials = [
+                f"log in as {config.admin_email}; forgot the password? "
+                f"cloudsim user update {config.admin_email} --password-stdin"
+            ]
+        else:
+            credentials = [f"created the first admin: {admin.user.email}"]
             if admin.generated_password:
-                click.echo(f"  password (shown once): {admin.generated_password}")
+                credentials.append(f"  password (shown once): {admin.generated_password}")
         if config.admin_token and ensure_admin_token(config.admin_email, config.admin_token):
             click.echo(f"gave {config.admin_email} the API token from CLOUDSIM_ADMIN_TOKEN")
-    supervisor = Supervisor(log=lambda line: click.echo(f"cloudsim up: {line}", err=True))
+    log_dir = config.instance_dir / "logs"
+    supervisor = Supervisor(
+        log=lambda line: click.echo(f"cloudsim up: {line}", err=True), log_dir=log_dir
+    )
+    shown = False
     try:
         for service, timeout in _services(config):
+            click.echo(f"starting {service.name}")
             supervisor.add(service, timeout)
         scheme = "https" if config.tls_cert else "http"
-        click.echo(f"CloudSim is running at {scheme}://{config.bind}/  (Ctrl-C stops everything)")
         if demo:
             _launch_demo(f"{scheme}://{config.bind}/")
+        # What a person needs comes last, where the terminal leaves it.
+        lines = [
+            f"CloudSim is running at {scheme}://{config.bind}/  (Ctrl-C stops everything)",
+            f"services' logs: {log_dir}/",
+            *credentials,
+        ]
+        rule = "=" * max(len(line) for line in lines)
+        click.echo("\n".join([rule, *lines, rule]))
+        shown = True
         supervisor.run()
     except RuntimeError as exc:
         raise click.ClickException(str(exc)) from None
     finally:
         supervisor.stop()
+        if not shown and admin is not None:
+            click.echo("\n".join(credentials))  # a new admin's password is never lost

@@ -8,6 +8,7 @@ import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import FrameType
 
 RESTART_DELAYS = (1.0, 2.0, 5.0, 10.0, 30.0)
@@ -26,8 +27,16 @@ class Service:
     restarts: int = 0
     started_at: float = 0.0
 
-    def start(self) -> None:
-        self.process = subprocess.Popen(self.argv, env=self.env)
+    def start(self, log_dir: Path | None = None) -> None:
+        """Start the process, its output appended to log_dir/NAME.log (else to ours)."""
+        if log_dir is None:
+            self.process = subprocess.Popen(self.argv, env=self.env)
+        else:
+            log_dir.mkdir(mode=0o700, parents=True, exist_ok=True)
+            with (log_dir / f"{self.name}.log").open("ab") as out:
+                self.process = subprocess.Popen(
+                    self.argv, env=self.env, stdout=out, stderr=subprocess.STDOUT
+                )
         self.started_at = time.monotonic()
 
 
@@ -36,21 +45,24 @@ class Supervisor:
     """Run services until interrupted; report and restart any that exits on its own."""
 
     log: Callable[[str], None]
+    log_dir: Path | None = None  # where each service's output goes; None: this process's own
     services: list[Service] = field(default_factory=list)
     _stopping: bool = False
 
     def add(self, service: Service, timeout: float = 30.0) -> None:
         """Start a service and wait until it is ready (when it says how to tell)."""
-        service.start()
+        service.start(self.log_dir)
         self.services.append(service)
         if service.ready is None:
             return
         deadline = time.monotonic() + timeout
+        see = f" (its output: {self.log_dir / service.name}.log)" if self.log_dir else ""
         while not service.ready():
             if service.process is not None and service.process.poll() is not None:
-                raise RuntimeError(f"{service.name} exited with code {service.process.returncode}")
+                code = service.process.returncode
+                raise RuntimeError(f"{service.name} exited with code {code}{see}")
             if time.monotonic() > deadline:
-                raise RuntimeError(f"{service.name} not ready after {timeout:.0f} s")
+                raise RuntimeError(f"{service.name} not ready after {timeout:.0f} s{see}")
             time.sleep(0.1)
 
     def run(self) -> None:
@@ -70,10 +82,13 @@ class Supervisor:
                 if time.monotonic() - service.started_at > 60:
                     service.restarts = 0  # it ran fine for a while: forget old crashes
                 delay = RESTART_DELAYS[min(service.restarts, len(RESTART_DELAYS) - 1)]
-                self.log(f"{service.name} exited with code {code}; restarting in {delay:.0f} s")
+                self.log(
+                    f"{service.name} exited with code {code}; restarting in {delay:.0f} s"
+                    + (f" (its output: {self.log_dir / service.name}.log)" if self.log_dir else "")
+                )
                 time.sleep(delay)
                 service.restarts += 1
-                service.start()
+                service.start(self.log_dir)
             time.sleep(0.5)
         self.stop()
 

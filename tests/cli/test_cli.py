@@ -58,7 +58,7 @@ def test_help_imports_no_command_and_no_engine() -> None:
     )
     for args in (["--help"], ["--version"]):
         result = subprocess.run(
-            [str(Path(".venv/bin/python").absolute()), "-c", probe, *args],
+            [str(Path(".venv/bin/python").absolute()), "-W", "error", "-c", probe, *args],
             capture_output=True,
             text=True,
             check=True,

@@ -66,9 +66,15 @@ def test_up_serves_runs_jobs_and_stops_everything(
     process = _start(env, log, pytestconfig.rootpath)
     try:
         wait_for(lambda: "CloudSim is running at" in log.read_text(), 90, "cloudsim up")
+        wait_for(lambda: log.read_text().endswith("=\n"), 10, "the framed summary")
         output = log.read_text()
-        assert f"http://127.0.0.1:{web}/" in output
-        password = re.search(r"password \(shown once\): (\S+)", output).group(1)  # type: ignore[union-attr]
+        # what a person needs comes last: the address, then the admin and the password
+        *_, rule, running, logs, admin, secret, closing = output.splitlines()
+        assert rule == closing and set(rule) == {"="}
+        assert running.startswith(f"CloudSim is running at http://127.0.0.1:{web}/")
+        assert logs == f"services' logs: {tmp_path / 'instance' / 'logs'}/"
+        assert admin == "created the first admin: root@example.org"
+        password = re.fullmatch(r"  password \(shown once\): (\S+)", secret).group(1)  # type: ignore[union-attr]
         base = f"http://127.0.0.1:{web}"
         session = requests.Session()
         page = session.get(f"{base}/login", timeout=10).text
@@ -94,7 +100,11 @@ def test_up_serves_runs_jobs_and_stops_everything(
         children = _stop(process)
     assert len(children) == 4  # redis, worker, beat, web
     assert not [pid for pid in children if _alive(pid)]
-    assert "password (shown once)" not in log.read_text().split("CloudSim is running")[-1]
+    output = log.read_text()
+    assert output.count(password) == 1  # shown once, and no service printed it
+    # the services' output is in their own files, not on the terminal
+    assert "GET /login" in (tmp_path / "instance" / "logs" / "web.log").read_text()
+    assert "GET /login" not in output
 
     again = _start(
         env, tmp_path / "again.log", pytestconfig.rootpath
@@ -107,4 +117,6 @@ def test_up_serves_runs_jobs_and_stops_everything(
         )
     finally:
         _stop(again)
-    assert "created the first admin" not in (tmp_path / "again.log").read_text()
+    again_output = (tmp_path / "again.log").read_text()
+    assert "created the first admin" not in again_output
+    assert "log in as root@example.org; forgot the password? cloudsim user update" in again_output
