@@ -26,6 +26,7 @@ from cloudsim.competition.artifacts import (
     snapshot_bandwidth_log,
 )
 from cloudsim.competition.lifecycle import RunJob
+from cloudsim.competition.login_logs import snapshot_login_logs
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
@@ -81,9 +82,13 @@ class Machines:
         return [self.by_name[name] for name in self.fc_names if name in self.by_name]
 
     def by_role(self) -> dict[str, SSHTarget]:
+        """Return a target per source of run logs: sim, router, and each field computer."""
         found = {"sim": self.sim}
         if self.router is not None:
             found["router"] = self.router
+        for name in self.fc_names:
+            if name in self.by_name:
+                found[name] = self.by_name[name]
         return found
 
 
@@ -271,6 +276,10 @@ def _stop_on_machines(
         current_run.withdraw(reach.executor, reach.field_computers)
     except SSHError as exc:
         problems.append(f"current-run.json: {exc}")
+    try:
+        snapshot_login_logs(reach.executor, reach.field_computers, run.id)
+    except SSHError as exc:
+        problems.append(f"login records: {exc}")
     if reach.router is not None:
         ctx.stage("router", 30)
         try:

@@ -1,4 +1,5 @@
-"""Who may log into a team's field computers: the team account's keys, sudo, and the refresh."""
+"""Who may log into a team's field computers: each member's own account and keys, sudo, and
+the refresh that pushes them."""
 
 from __future__ import annotations
 
@@ -10,10 +11,11 @@ from cloudsim.auth.policy import SYSTEM
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import lifecycle
 from cloudsim.models import Constellation, ConstellationState, Role, SshKey, User
-from constellations.plans.roles import TEAM_USER
+from constellations.plans.base import MemberAccount, member_account_name
 from provisioners.remote.operations import MachineTemplates
 
-TEAM_KINDS = ("vrc",)  # kinds whose field computers have the team account
+TEAM_KINDS = ("vrc",)  # kinds whose field computers have the members' accounts
+ACCOUNT_PLACEHOLDER = "YOUR_ACCOUNT"  # in the ssh_config of someone with no account there
 
 
 def team_keys(team_id: int | None) -> tuple[str, ...]:
@@ -27,6 +29,40 @@ def team_keys(team_id: int | None) -> tuple[str, ...]:
         .order_by(SshKey.id)
     ).all()
     return tuple(f"{key} {email}" for key, email in rows)
+
+
+def team_members(team_id: int | None) -> tuple[MemberAccount, ...]:
+    """Return the account each active member of the team gets on its field computers."""
+    if team_id is None:
+        return ()
+    members = db.session.execute(
+        select(User.id, User.email)
+        .where(User.team_id == team_id, User.active.is_(True), User.role == Role.USER)
+        .order_by(User.id)
+    ).all()
+    keys: dict[int, list[str]] = {}
+    for user_id, key, email in db.session.execute(
+        select(SshKey.user_id, SshKey.public_key, User.email)
+        .join(User, SshKey.user_id == User.id)
+        .where(User.team_id == team_id)
+        .order_by(SshKey.id)
+    ):
+        keys.setdefault(user_id, []).append(f"{key} {email}")
+    return tuple(MemberAccount(uid, email, tuple(keys.get(uid, ()))) for uid, email in members)
+
+
+def account_name(user: User | None, constellation: Constellation) -> str | None:
+    """Return the user's account on the constellation's field computers, None if they have
+    none (not an active member of its team)."""
+    if (
+        user is None
+        or not user.active
+        or user.role != Role.USER
+        or constellation.team_id is None
+        or user.team_id != constellation.team_id
+    ):
+        return None
+    return member_account_name(user.email, user.id)
 
 
 def refresh_team_access(team_ids: Iterable[int | None], also: Iterable[Constellation] = ()) -> None:
@@ -51,13 +87,14 @@ def field_computers(constellation: Constellation) -> dict[str, str]:
     return {m.name: m.private_ip or "?" for m in constellation.machines if m.role == "fc"}
 
 
-def ssh_config(constellation: Constellation) -> str:
-    """Return the ssh_config snippet that logs a member into the team's field computers."""
+def ssh_config(constellation: Constellation, user: User | None) -> str:
+    """Return the ssh_config snippet that logs the user into the team's field computers as
+    their own account (a placeholder for someone who has none there)."""
     return MachineTemplates().render(
         "router/team-ssh-config.j2",
         {
             "constellation": constellation.name,
             "field_computers": field_computers(constellation),
-            "user": TEAM_USER,
+            "user": account_name(user, constellation) or ACCOUNT_PLACEHOLDER,
         },
     )
