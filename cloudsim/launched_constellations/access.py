@@ -20,15 +20,7 @@ ACCOUNT_PLACEHOLDER = "YOUR_ACCOUNT"  # in the ssh_config of someone with no acc
 
 def team_keys(team_id: int | None) -> tuple[str, ...]:
     """Return the authorized_keys lines of the team's active members, each naming its owner."""
-    if team_id is None:
-        return ()
-    rows = db.session.execute(
-        select(SshKey.public_key, User.email)
-        .join(User, SshKey.user_id == User.id)
-        .where(User.team_id == team_id, User.active.is_(True), User.role == Role.USER)
-        .order_by(SshKey.id)
-    ).all()
-    return tuple(f"{key} {email}" for key, email in rows)
+    return tuple(key for member in team_members(team_id) for key in member.keys)
 
 
 def team_members(team_id: int | None) -> tuple[MemberAccount, ...]:
