@@ -3,11 +3,17 @@ the refresh that pushes them."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 
+import redis
+from flask import current_app
+from redis.exceptions import LockError
 from sqlalchemy import select
 
 from cloudsim.auth.policy import SYSTEM
+from cloudsim.config import Config
+from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import lifecycle
 from cloudsim.models import Constellation, ConstellationState, Role, SshKey, User
@@ -16,6 +22,39 @@ from provisioners.remote.operations import MachineTemplates
 
 TEAM_KINDS = ("vrc",)  # kinds whose field computers have the members' accounts
 ACCOUNT_PLACEHOLDER = "YOUR_ACCOUNT"  # in the ssh_config of someone with no account there
+REFRESH_LOCK_SECONDS = 600  # longest a refresh waits for the one before it (and holds it)
+
+
+class RefreshBusy(CloudSimError):
+    """Another refresh of the constellation's access held its lock for too long."""
+
+
+@contextmanager
+def refresh_turn(constellation_id: int) -> Iterator[None]:
+    """Let one refresh of a constellation's access run at a time.
+
+    Two at once would race on the machines: one that read the members before a member was
+    disabled could write that member's account back after the other removed it. One after
+    the other, each reads who the members are once it holds the lock, so the last one to
+    run pushes the newest. The lock expires by itself if its holder dies.
+    """
+    config: Config = current_app.config["CLOUDSIM"]
+    client = redis.Redis.from_url(config.effective_redis_url)
+    lock = client.lock(
+        f"cloudsim:constellation:{constellation_id}:access", timeout=REFRESH_LOCK_SECONDS
+    )
+    if not lock.acquire(blocking_timeout=REFRESH_LOCK_SECONDS):
+        raise RefreshBusy(
+            f"constellation {constellation_id}: another refresh of its access still runs "
+            f"after {REFRESH_LOCK_SECONDS} s"
+        )
+    try:
+        yield
+    finally:
+        try:
+            lock.release()
+        except LockError:
+            pass  # expired: whoever took it since keeps it
 
 
 def team_keys(team_id: int | None) -> tuple[str, ...]:

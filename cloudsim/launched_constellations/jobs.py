@@ -21,7 +21,7 @@ from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.launched_constellations import lifecycle
-from cloudsim.launched_constellations.access import TEAM_KINDS, team_members
+from cloudsim.launched_constellations.access import TEAM_KINDS, refresh_turn, team_members
 from cloudsim.launched_constellations.connect import (
     forget_connections,
     machine_host_keys,
@@ -148,7 +148,14 @@ def _launch(
 @job_kind("constellation.refresh_access", payload=ConstellationJob)
 def refresh_access(ctx: JobContext, job: ConstellationJob) -> None:
     """Push who may come in: the VPN's revocations to the router (ending the revoked sessions
-    only) and the members' accounts and keys to the field computers (ending former members')."""
+    only) and the members' accounts and keys to the field computers (ending former members').
+
+    One at a time per constellation; each reads the members once it is its turn."""
+    with refresh_turn(job.constellation_id):
+        _refresh_access(ctx, job)
+
+
+def _refresh_access(ctx: JobContext, job: ConstellationJob) -> None:
     constellation = ctx.load(Constellation, job.constellation_id)
     if constellation.state != ConstellationState.READY:
         ctx.log(
