@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import zipfile
+from threading import Thread
 
 import pytest
 from flask import Flask
@@ -14,7 +15,7 @@ from flask.testing import FlaskClient
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.extensions import db
-from cloudsim.launched_constellations.access import team_members
+from cloudsim.launched_constellations.access import refresh_turn, team_members
 from cloudsim.models import Constellation, ConstellationState, Machine, Role, SshKey, User
 from cloudsim.people.service import update_user
 from constellations.plans.base import MEMBER_UID_BASE, member_account_name
@@ -105,3 +106,22 @@ def test_accounts_follow_the_team_active_members_only_each_with_their_own_keys(
     update_user(SYSTEM, bob.id, active=False)
     db.session.commit()
     assert [m.name for m in team_members(alice.team_id)] == [_account(alice)]
+
+
+def test_refreshes_of_one_constellation_take_turns_others_run_at_once(app: Flask) -> None:
+    entered: list[int] = []
+
+    def refresh(constellation_id: int) -> None:
+        with app.app_context(), refresh_turn(constellation_id):
+            entered.append(constellation_id)
+
+    with refresh_turn(4242):
+        same, other = (Thread(target=refresh, args=(n,)) for n in (4242, 4243))
+        same.start()
+        other.start()
+        other.join(30)
+        assert entered == [4243]  # another constellation's refresh does not wait
+        same.join(1)
+        assert same.is_alive() and entered == [4243]  # this one waits for its turn
+    same.join(30)
+    assert entered == [4243, 4242]
