@@ -136,7 +136,7 @@ def retry(ref: int) -> ResponseReturnValue:
 @bp.route("/constellations/<int:ref>/team-sudo", methods=["POST"])
 @role_required(Role.OFFICER)
 def team_sudo(ref: int) -> ResponseReturnValue:
-    """Let the team account on the field computers use sudo (?allowed=1), or not (0)."""
+    """Let the team's members use sudo on the field computers (?allowed=1), or not (0)."""
     if not ConfirmForm().validate_on_submit():
         return redirect(url_for("constellations.show", ref=ref)), 400
     allowed = query_int("allowed", 0, maximum=1) == 1
