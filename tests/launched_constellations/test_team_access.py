@@ -154,7 +154,7 @@ def test_a_team_logs_in_deploys_its_code_and_scores_while_sim_stays_sealed(
         assert before["last_run"]["uplink"]["accepted"]["payload_bytes"] < 10_000
         # the team's process waits for the run, then drives the robot
         ok, _ = as_team(
-            "alice", "cd team && nohup /opt/drcsim/bin/python team_code.py > team_code.log 2>&1 &"
+            "alice", "cd team; nohup /opt/drcsim/bin/python team_code.py > team_code.log 2>&1 &"
         )
         assert ok
 
