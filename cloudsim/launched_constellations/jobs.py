@@ -183,12 +183,12 @@ def _refresh_access(ctx: JobContext, job: ConstellationJob) -> None:
             n: [item for p in c.machine.plan if Need.VPN in needs_of([p]) for item in PLANS[p](c)]
             for n, c in contexts.items()
         }
+        members: tuple[MemberAccount, ...] = ()
         for machine in field_computers:
-            plans[machine.name] = member_accounts(
-                _plan_context(constellation, kind, machine.name, subnet, config)
-            )
+            context = _plan_context(constellation, kind, machine.name, subnet, config)
+            members = context.members
+            plans[machine.name] = member_accounts(context)
         _deploy(ctx, executor, {n: reach[n] for n in plans}, plans)
-        members = team_members(constellation.team_id)
         ctx.log(
             f"member accounts: {', '.join(m.name for m in members) or 'none'} "
             f"({sum(len(m.keys) for m in members)} key(s))"
