@@ -1,8 +1,9 @@
-"""Users' SSH public keys: validated, fingerprinted, installed for `team` on their field computers.
+"""Users' SSH public keys: validated, fingerprinted, installed in their own account on their
+team's field computers.
 
 A user manages only their own keys. Every change starts the refresh of the team's
-constellations (`constellation.refresh_access`), which writes the team account's
-authorized_keys on the field computers to exactly the active members' keys.
+constellations (`constellation.refresh_access`), which writes each active member's
+authorized_keys on the field computers to exactly that member's keys.
 """
 
 from __future__ import annotations

@@ -53,6 +53,9 @@ class RemoteLog:
     required: bool = True
 
 
+LOGIN_LOG_NAME = "logins-{machine}.tsv"
+
+
 def run_dir(run_id: int) -> str:
     """Return the folder of a run's logs on the sim and the router."""
     return f"{RUNS_DIR}/{run_id}"
@@ -67,6 +70,11 @@ RUN_LOGS = (
     RemoteLog("output", "sim", "simulator.log", required=False),
     RemoteLog("world", "sim", rundir.WORLD, required=False),  # the document it was built from
     RemoteLog("bandwidth", "router", "bandwidth.jsonl"),
+    # who logged into each field computer (login_logs.py), by machine name
+    *(
+        RemoteLog("logins", fc, LOGIN_LOG_NAME.format(machine=fc), required=False)
+        for fc in ("fc1", "fc2")
+    ),
 )
 
 

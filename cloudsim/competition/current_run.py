@@ -1,6 +1,6 @@
 """Tell team code on the field computers that a run is on: /var/lib/cloudsim/current-run.json.
 
-Written (0644, readable by the `team` account) once the simulator runs, removed when the run
+Written (0644, readable by every member's account) once the simulator runs, removed when the run
 stops. The simulator's own `hello` says the same from the API side.
 """
 

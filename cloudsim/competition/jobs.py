@@ -25,6 +25,7 @@ from flask import current_app
 from cloudsim.competition import current_run, lifecycle
 from cloudsim.competition.artifacts import LogStore, artifact_for, collect_logs, run_dir
 from cloudsim.competition.lifecycle import RunJob
+from cloudsim.competition.login_logs import snapshot_login_logs
 from cloudsim.competition.run_steps import simulator_span, step_done, unit_started_at
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
@@ -81,9 +82,13 @@ class Machines:
         return [self.by_name[name] for name in self.fc_names if name in self.by_name]
 
     def by_role(self) -> dict[str, SSHTarget]:
+        """Return a target per source of run logs: sim, router, and each field computer."""
         found = {"sim": self.sim}
         if self.router is not None:
             found["router"] = self.router
+        for name in self.fc_names:
+            if name in self.by_name:
+                found[name] = self.by_name[name]
         return found
 
 
@@ -290,6 +295,10 @@ def _stop_on_machines(
     except SSHError as exc:
         problems.append(f"current-run.json: {exc}")
     step_done("run.stop", "withdrawn")
+    try:
+        snapshot_login_logs(reach.executor, reach.field_computers, run.id)
+    except SSHError as exc:
+        problems.append(f"login records: {exc}")
     if reach.router is not None:
         # disarmed only once the simulator has stopped: its caps held to its last second
         ctx.stage("router", 30)

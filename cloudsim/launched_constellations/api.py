@@ -73,7 +73,7 @@ class ConstellationById(MethodView):
     @blp.arguments(ConstellationUpdateSchema)
     @blp.response(200, ConstellationSchema)
     def patch(self, data: dict[str, Any], ref: int) -> Any:
-        """Let the team account on the field computers use sudo, or not (officers)."""
+        """Let the team's members use sudo on the field computers, or not (officers)."""
         return service.set_team_sudo(caller(), ref, data["team_sudo"])
 
     @blp.response(202, JobSchema)

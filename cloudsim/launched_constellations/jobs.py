@@ -21,7 +21,7 @@ from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.launched_constellations import lifecycle
-from cloudsim.launched_constellations.access import TEAM_KINDS, team_keys
+from cloudsim.launched_constellations.access import TEAM_KINDS, refresh_turn, team_members
 from cloudsim.launched_constellations.connect import (
     forget_connections,
     machine_host_keys,
@@ -50,7 +50,8 @@ from constellations.plans import (
     firewall,
     needs_of,
 )
-from constellations.plans.roles import team_account
+from constellations.plans.base import MemberAccount
+from constellations.plans.members import member_accounts
 from provisioners.providers.base import WAITING, CloudSimNodeDriver
 from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor, SSHTarget
 
@@ -84,13 +85,13 @@ def launch_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     ctx.checkpoint()  # ready first: a change from now on starts its own push
     if constellation.kind in TEAM_KINDS and _team_access(constellation) != deployed:
         # changed while launching, when no push runs: the field computers have the old ones
-        ctx.log("the team's keys or sudo changed during the launch: pushing them again")
+        ctx.log("the team's members, keys or sudo changed during the launch: pushing them again")
         lifecycle.start_refresh_access(SYSTEM, constellation)
 
 
-def _team_access(constellation: Constellation) -> tuple[tuple[str, ...], bool]:
-    """Return what the field computers' team account gets: its keys, and sudo or not."""
-    return team_keys(constellation.team_id), constellation.team_sudo
+def _team_access(constellation: Constellation) -> tuple[tuple[MemberAccount, ...], bool]:
+    """Return what the field computers get: the members' accounts and keys, and sudo or not."""
+    return team_members(constellation.team_id), constellation.team_sudo
 
 
 def _launch(
@@ -149,7 +150,14 @@ def _launch(
 @job_kind("constellation.refresh_access", payload=ConstellationJob)
 def refresh_access(ctx: JobContext, job: ConstellationJob) -> None:
     """Push who may come in: the VPN's revocations to the router (ending the revoked sessions
-    only) and the team members' SSH keys to the field computers' team account."""
+    only) and the members' accounts and keys to the field computers (ending former members').
+
+    One at a time per constellation; each reads the members once it is its turn."""
+    with refresh_turn(job.constellation_id):
+        _refresh_access(ctx, job)
+
+
+def _refresh_access(ctx: JobContext, job: ConstellationJob) -> None:
     constellation = ctx.load(Constellation, job.constellation_id)
     if constellation.state != ConstellationState.READY:
         ctx.log(
@@ -177,12 +185,16 @@ def refresh_access(ctx: JobContext, job: ConstellationJob) -> None:
             n: [item for p in c.machine.plan if Need.VPN in needs_of([p]) for item in PLANS[p](c)]
             for n, c in contexts.items()
         }
+        members: tuple[MemberAccount, ...] = ()
         for machine in field_computers:
-            plans[machine.name] = team_account(
-                _plan_context(constellation, kind, machine.name, subnet, config)
-            )
+            context = _plan_context(constellation, kind, machine.name, subnet, config)
+            members = context.members
+            plans[machine.name] = member_accounts(context)
         _deploy(ctx, executor, {n: reach[n] for n in plans}, plans)
-        ctx.log(f"team account: {len(team_keys(constellation.team_id))} key(s) installed")
+        ctx.log(
+            f"member accounts: {', '.join(m.name for m in members) or 'none'} "
+            f"({sum(len(m.keys) for m in members)} key(s))"
+        )
 
 
 def ensure_network(
@@ -314,7 +326,7 @@ def _plan_context(
         machine=kind.machine(name),
         subnet=subnet,
         addresses={m.name: m.private_ip or "" for m in constellation.machines},
-        team_keys=team_keys(constellation.team_id) if field_computer else (),
+        members=team_members(constellation.team_id) if field_computer else (),
         team_sudo=constellation.team_sudo,
     )
 

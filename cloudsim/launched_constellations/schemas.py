@@ -28,7 +28,7 @@ class ConstellationSchema(Schema):
     error = fields.Str(allow_none=True)
     created_at = fields.DateTime()
     team_sudo = fields.Bool(
-        metadata={"description": "May the team account on the field computers use sudo"}
+        metadata={"description": "May the team's members use sudo on the field computers"}
     )
     machines = fields.List(fields.Nested(MachineSchema))
 

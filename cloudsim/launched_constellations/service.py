@@ -168,13 +168,13 @@ def _audit(action: str, actor: Actor, constellation: Constellation) -> None:
 
 
 def set_team_sudo(actor: Actor, ref: int | str, allowed: bool) -> Constellation:
-    """Let the team account on the field computers use sudo, or not (officers); pushed at once."""
+    """Let the team's members on the field computers use sudo, or not (officers); pushed at once."""
     require_role(actor, Role.OFFICER, "change what a team may do on its field computers")
     constellation = get_constellation(actor, ref)
     if constellation.kind not in TEAM_KINDS:
         raise InvalidInput(
             f"{constellation.name} is a {constellation.kind} constellation: "
-            "it has no field computers with a team account"
+            "it has no field computers for the team's members"
         )
     if constellation.team_sudo != allowed:
         constellation.team_sudo = allowed

@@ -26,7 +26,7 @@ from cloudsim.models import Role
 from cloudsim.people.service import visible_teams
 from cloudsim.web.downloads import attachment
 from cloudsim.web.inputs import query_id, query_int
-from constellations.plans.roles import TEAM_USER
+from constellations.plans.base import member_account_name
 
 bp = Blueprint("constellations", __name__)
 
@@ -82,9 +82,11 @@ def show(ref: int) -> ResponseReturnValue:
         constellation=constellation,
         job=service.latest_job(constellation),
         confirm=ConfirmForm(),
-        team_user=TEAM_USER,
+        account=access.account_name(current_user, constellation),
+        placeholder=access.ACCOUNT_PLACEHOLDER,
+        member_account=member_account_name,
         field_computers=access.field_computers(constellation),
-        ssh_config=access.ssh_config(constellation),
+        ssh_config=access.ssh_config(constellation, current_user),
     )
 
 
@@ -134,7 +136,7 @@ def retry(ref: int) -> ResponseReturnValue:
 @bp.route("/constellations/<int:ref>/team-sudo", methods=["POST"])
 @role_required(Role.OFFICER)
 def team_sudo(ref: int) -> ResponseReturnValue:
-    """Let the team account on the field computers use sudo (?allowed=1), or not (0)."""
+    """Let the team's members use sudo on the field computers (?allowed=1), or not (0)."""
     if not ConfirmForm().validate_on_submit():
         return redirect(url_for("constellations.show", ref=ref)), 400
     allowed = query_int("allowed", 0, maximum=1) == 1

@@ -14,12 +14,16 @@ from cloudsim.audit.service import record
 from cloudsim.auth.policy import SYSTEM, require_team_access
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.launched_constellations.access import field_computers, refresh_team_access, ssh_config
+from cloudsim.launched_constellations.access import (
+    account_name,
+    field_computers,
+    refresh_team_access,
+    ssh_config,
+)
 from cloudsim.launched_constellations.keys import constellation_secret
 from cloudsim.models import Constellation, Role, Secret, SecretKind, User
 from cloudsim.models.machines import GONE
 from constellations.plans.base import VpnMaterial
-from constellations.plans.roles import TEAM_USER
 from constellations.plans.router import VPN_SERVER_NAME
 from provisioners.remote import pki
 from provisioners.remote.operations import MachineTemplates
@@ -283,8 +287,8 @@ def vpn_bundle(
                 m.name: m.private_ip or "?" for m in constellation.machines if m.role != "router"
             },
             "field_computers": field_computers(constellation),
-            "team_user": TEAM_USER,
-            "ssh_config": ssh_config(constellation),
+            "account": account_name(user, constellation),
+            "ssh_config": ssh_config(constellation, user),
         },
     )
     buffer = io.BytesIO()

@@ -125,7 +125,7 @@ class LoginSession(Base):
 
 
 class SshKey(Base):
-    """A user's SSH public key: installed for the team account on their team's field computers."""
+    """A user's SSH public key: installed in their own account on their team's field computers."""
 
     __tablename__ = "ssh_keys"
     __table_args__ = (UniqueConstraint("user_id", "fingerprint"),)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -61,6 +62,48 @@ class VpnMaterial:
     port: int = 1194
 
 
+# A member's uid on the field computers is this plus their CloudSim user id: the same on fc1
+# and fc2, stable across renames, and clear of system (< 1000), ordinary (< 60000), systemd's
+# dynamic (61184-65519) and subordinate (100000 + 65536 per user) ranges.
+MEMBER_UID_BASE = 300000
+MEMBER_UID_SPAN = 100000  # user ids below this only
+
+
+@dataclass(frozen=True)
+class MemberAccount:
+    """A team member's own Unix account on the field computers: who, and the keys that log in."""
+
+    user_id: int
+    email: str
+    keys: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not 0 < self.user_id < MEMBER_UID_SPAN:
+            raise ValueError(f"no field-computer account for user id {self.user_id}")
+
+    @property
+    def name(self) -> str:
+        """Return the account's name: the e-mail's local part, made safe, then the user id."""
+        return member_account_name(self.email, self.user_id)
+
+    @property
+    def uid(self) -> int:
+        """Return the account's uid (the same on every field computer)."""
+        return MEMBER_UID_BASE + self.user_id
+
+
+def member_account_name(email: str, user_id: int) -> str:
+    """Return a member's account name, e.g. alice.smith@x.org, id 7 -> alice_smith-7.
+
+    The id makes it unique and keeps system accounts (never named <word>-<digits>) apart; the
+    local part only helps people read logs. Only [a-z0-9_-], 28 characters at most.
+    """
+    local = re.sub(r"[^a-z0-9]+", "_", email.split("@", 1)[0].lower()).strip("_")[:20]
+    if not local or not local[0].isalpha():
+        local = f"m{local}"[:20]
+    return f"{local}-{int(user_id)}"
+
+
 @dataclass(frozen=True)
 class PlanContext:
     """Everything a plan may use about the machine it deploys and its constellation."""
@@ -76,8 +119,8 @@ class PlanContext:
     router_wheelhouse: Path | None = None  # routers with a VPN: csrouter and its wheels
     app_bundle: Path | None = None  # CloudSim servers only: source + wheels
     secrets: Mapping[str, str] = field(default_factory=dict, repr=False)
-    team_keys: tuple[str, ...] = ()  # field computers: the team members' SSH public keys
-    team_sudo: bool = False  # field computers: may the team account use sudo
+    members: tuple[MemberAccount, ...] = ()  # field computers: the team's active members
+    team_sudo: bool = False  # field computers: may the members use sudo
     templates: MachineTemplates = field(default_factory=MachineTemplates)
 
     @property

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from constellations.plans.base import Action, PlanContext, PlanItem
+from constellations.plans.members import member_accounts
 from constellations.plans.software import (
     REMOTE_ROOT,
     install_source_bundle,
     install_wheelhouse,
     wait_for_port,
 )
-from provisioners.remote.operations import absent, directory, file, service, user
+from provisioners.remote.operations import directory, file, service
 from provisioners.remote.ssh import SSHExecutor, SSHTarget
 
 SIMULATOR_VENV = "/opt/drcsim"
@@ -22,9 +23,6 @@ CLOUDSIM_TLS_KEY = "/etc/cloudsim/tls.key"
 CLOUDSIM_INSTANCE = "/var/lib/cloudsim"
 CLOUDSIM_PORT = 5000
 CLOUDSIM_ADMIN_EMAIL = "admin@example.org"
-TEAM_USER = "team"  # the account team members log into on the field computers
-TEAM_HOME = f"/home/{TEAM_USER}"
-TEAM_SUDOERS = f"/etc/sudoers.d/cloudsim-{TEAM_USER}"
 RUN_STATE_DIR = "/var/lib/cloudsim"  # current-run.json: readable by the team, written by us
 
 
@@ -35,33 +33,14 @@ def simulator(ctx: PlanContext) -> list[PlanItem]:
 
 def field_computer(ctx: PlanContext) -> list[PlanItem]:
     """Install drcsim's client library (and example controller), which team code drives the
-    robot with, without the physics engine (only sim needs it); make the team's account."""
+    robot with, without the physics engine (only sim needs it); make the members' accounts.
+
+    CloudSim's own keys live in /root (0700) and its run state is root's, except
+    current-run.json, which is for the team.
+    """
     return [
         install_wheelhouse(_wheelhouse(ctx), SIMULATOR_VENV, "drcsim", only=CLIENT_ONLY),
-        *team_account(ctx),
-    ]
-
-
-def team_account(ctx: PlanContext) -> list[PlanItem]:
-    """The unprivileged `team` account: its members' keys exactly, sudo only if allowed.
-
-    Its home is never touched again (code stays between runs). CloudSim's own keys live in
-    /root (0700) and its run state is root's, except current-run.json, which is for them.
-    """
-    sudoers = f"# CloudSim: an officer let the team use sudo\n{TEAM_USER} ALL=(ALL) NOPASSWD:ALL\n"
-    return [
-        user(TEAM_USER),
-        Action("team: keys only, no password", _no_password),
-        directory(TEAM_HOME, mode=0o750, owner=TEAM_USER, group=TEAM_USER),
-        directory(f"{TEAM_HOME}/.ssh", mode=0o700, owner=TEAM_USER, group=TEAM_USER),
-        file(
-            f"{TEAM_HOME}/.ssh/authorized_keys",
-            "".join(f"{key}\n" for key in ctx.team_keys),
-            mode=0o600,
-            owner=TEAM_USER,
-            group=TEAM_USER,
-        ),
-        file(TEAM_SUDOERS, sudoers, mode=0o440) if ctx.team_sudo else absent(TEAM_SUDOERS),
+        *member_accounts(ctx),
         directory(RUN_STATE_DIR, mode=0o755),
     ]
 
@@ -105,16 +84,6 @@ def cloudsim_server(ctx: PlanContext) -> list[PlanItem]:
         service("cloudsim", running=True, enabled=True),
         wait_for_port(CLOUDSIM_PORT, 180),
     ]
-
-
-def _no_password(executor: SSHExecutor, target: SSHTarget) -> bool:
-    """Give `team` no password rather than a locked one: sshd refuses a locked account's keys
-    when it does not use PAM."""
-    shadow = executor.run(target, f"getent shadow {TEAM_USER} | cut -d: -f2").stdout.strip()
-    if shadow == "*":
-        return False
-    executor.run(target, f"usermod --password '*' {TEAM_USER}")
-    return True
 
 
 def _daemon_reload(executor: SSHExecutor, target: SSHTarget) -> bool:

@@ -186,8 +186,8 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     headers = token_for(user_a)
     with machines(run, constellations_config) as reach:
         for artifact in stored.values():
-            target = reach.router if artifact.filename == "bandwidth.jsonl" else reach.sim
-            assert target is not None
+            source = next(log.machine for log in RUN_LOGS if log.filename == artifact.filename)
+            target = reach.by_role()[source]
             on_machine = remote_sha256(
                 reach.executor, target, f"{run_dir(run.id)}/{artifact.filename}"
             )

@@ -75,21 +75,3 @@ def test_router_forwards_vpn_and_lan_but_drops_public_to_lan() -> None:
     rules = [" ".join(rule) for rule in forward_rules(_context("router"))]
     assert rules.index("-s 10.211.9.0/24 -j ACCEPT") < rules.index("-d 10.211.9.0/24 -j DROP")
     assert not any("tun+" in rule and "ACCEPT" in rule for rule in rules)  # no VPN here
-
-
-def test_field_computers_get_the_team_account_with_exactly_the_members_keys() -> None:
-    from dataclasses import replace
-
-    from constellations.plans.roles import team_account
-
-    keys = ("ssh-ed25519 AAAAC3Nza1 alice@example.org", "ssh-ed25519 AAAAC3Nza2 bob@example.org")
-    items = team_account(replace(_context("fc1"), team_keys=keys))
-    names = [item.name for item in items]
-    assert names[0] == "user team" and "absent /etc/sudoers.d/cloudsim-team" in names
-    authorized = next(i for i in items if i.name == "file /home/team/.ssh/authorized_keys")
-    assert isinstance(authorized, Operation)
-    [upload] = authorized.steps(PathState.absent())
-    assert upload.content == (keys[0] + "\n" + keys[1] + "\n").encode()  # type: ignore[attr-defined]
-    assert upload.mode == 0o600 and upload.owner == "team"  # type: ignore[attr-defined]
-    allowed = [i.name for i in team_account(replace(_context("fc1"), team_sudo=True))]
-    assert "file /etc/sudoers.d/cloudsim-team" in allowed

@@ -15,7 +15,7 @@ from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair
 from cloudsim.models import Constellation, ConstellationState, Job, JobState, MachineState
 from cloudsim.people.service import create_team
-from constellations.plans.roles import TEAM_SUDOERS
+from constellations.plans.members import MEMBERS_SUDOERS
 from provisioners.remote.ssh import SSHExecutor
 from tests.launched_constellations.conftest import access_refreshes, finished, leftovers
 from tests.support.servers import wait_for
@@ -86,7 +86,7 @@ def _sudo_while_launching(constellation: Constellation, job: Job) -> None:
 def _sudo_reaches_the_field_computers(
     constellation: Constellation, done: Job, config: Config
 ) -> None:
-    """The launch, once ready, pushes the change it missed; the team account has sudo on fc1."""
+    """The launch, once ready, pushes the change it missed; the team's members have sudo on fc1."""
     assert "changed during the launch" in done.log
     (refresh,) = access_refreshes(constellation.id)
     assert finished(refresh.id).state == JobState.SUCCEEDED
@@ -94,5 +94,5 @@ def _sudo_reaches_the_field_computers(
     keys = constellation_keypair(constellation)
     reach = targets(constellation, keys, config)
     with SSHExecutor(machine_host_keys(constellation), secrets=[keys.private]) as executor:
-        sudoers = executor.run(reach["fc1"], f"cat {TEAM_SUDOERS}", check=False)
+        sudoers = executor.run(reach["fc1"], f"cat {MEMBERS_SUDOERS}", check=False)
     assert sudoers.ok and "NOPASSWD" in sudoers.stdout, sudoers.stderr

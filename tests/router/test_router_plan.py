@@ -105,10 +105,10 @@ def test_the_bundle_readme_lists_the_lan_machines() -> None:
             "remote_port": 1194,
             "lan_addresses": {"sim": "10.0.0.51", "fc1": "10.0.0.52"},
             "field_computers": {"fc1": "10.0.0.52"},
-            "team_user": "team",
+            "account": "alice-7",
             "ssh_config": "Host alpha-fc1",
         },
     )
     assert "sudo openvpn --config alpha.ovpn" in text
-    assert "ssh team@10.0.0.52" in text and "Host alpha-fc1" in text
+    assert "ssh alice-7@10.0.0.52" in text and "Host alpha-fc1" in text
     assert "    sim      10.0.0.51\n    fc1      10.0.0.52\n" in text
