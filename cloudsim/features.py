@@ -27,6 +27,7 @@ FEATURES = (
     "cloudsim.team_instances",
     "cloudsim.portal",
     "cloudsim.worlds",
+    "cloudsim.monitoring",
 )
 
 

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import shutil
 import sys
+from pathlib import Path
 
 import click
 from sqlalchemy import select
@@ -34,6 +36,8 @@ def _services(config: Config) -> list[tuple[Service, float]]:
     env = dict(os.environ)
     env["CLOUDSIM_INSTANCE_DIR"] = str(config.instance_dir)
     env["CLOUDSIM_REDIS_URL"] = config.effective_redis_url
+    json_logs = config.log_format == "json"
+    quiet = ["--quiet"] if json_logs else []  # Celery's banner is no JSON line
     python = sys.executable
     services: list[tuple[Service, float]] = []
     if config.redis_url is None:
@@ -56,6 +60,7 @@ def _services(config: Config) -> list[tuple[Service, float]]:
                     "celery",
                     "-A",
                     "cloudsim.worker",
+                    *quiet,
                     "worker",
                     "--loglevel",
                     log_level,
@@ -81,6 +86,7 @@ def _services(config: Config) -> list[tuple[Service, float]]:
                     "celery",
                     "-A",
                     "cloudsim.worker",
+                    *quiet,
                     "beat",
                     "--loglevel",
                     log_level,
@@ -94,6 +100,12 @@ def _services(config: Config) -> list[tuple[Service, float]]:
     )
     host, port = _host_port(config.bind)
     tls = ["--certfile", config.tls_cert, "--keyfile", config.tls_key] if config.tls_cert else []
+    # JSON: gunicorn's own lines as JSON, and the app logs each request (with its ids) itself
+    logs = (
+        ["--logger-class", "cloudsim.monitoring.logs.JsonGunicornLogger"]
+        if json_logs
+        else ["--access-logfile", "-"]
+    )
     services.append(
         (
             Service(
@@ -113,20 +125,28 @@ def _services(config: Config) -> list[tuple[Service, float]]:
                     str(config.web_workers),
                     "--threads",
                     str(config.web_threads),
-                    "--access-logfile",
-                    "-",
+                    *logs,
                     "--log-level",
                     log_level.lower(),
                     *tls,
                     "cloudsim.wsgi:app",
                 ],
-                env,
+                {**env, "PROMETHEUS_MULTIPROC_DIR": str(_metrics_dir(config))},
                 port_open(host, port),
             ),
             60,
         )
     )
     return services
+
+
+def _metrics_dir(config: Config) -> Path:
+    """Return an empty folder for the web processes' request timings (prometheus_client's
+    multiprocess mode: gunicorn's workers each write theirs, /metrics sums them)."""
+    folder = config.instance_dir / "metrics"
+    shutil.rmtree(folder, ignore_errors=True)  # counts of processes gone with a previous run
+    folder.mkdir(mode=0o700)
+    return folder
 
 
 DEMO_TEAM = "Demo team"
