@@ -77,6 +77,7 @@ def use_json_logs(level: str) -> None:
         root.removeHandler(old)
     root.addHandler(handler)
     root.setLevel(level)
+    logging.captureWarnings(True)  # Python's warnings (Celery's as root, ...) as JSON lines too
     cloudsim = logging.getLogger("cloudsim")
     for old in list(cloudsim.handlers):  # Flask's default handler on the app's logger
         cloudsim.removeHandler(old)
