@@ -81,11 +81,13 @@ def main(ctx: click.Context) -> None:
 
 
 def _register() -> None:
-    from cloudsim.cli import db, up
+    from cloudsim.cli import db, up, workers
     from cloudsim.features import features
 
     main.add_command(up.up)
     main.add_command(db.db)
+    main.add_command(workers.worker)
+    main.add_command(workers.beat)
     for feature in features():
         feature.init_cli(main)
 

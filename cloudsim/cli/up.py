@@ -20,6 +20,7 @@ from cloudsim.extensions import db
 from cloudsim.launched_constellations.service import launch
 from cloudsim.models import Constellation, ConstellationState, Team
 from cloudsim.people.service import create_team, ensure_first_admin
+from cloudsim.runtime.celery_argv import beat_argv, worker_argv
 from cloudsim.runtime.redis_server import redis_command
 from cloudsim.runtime.supervisor import Service, Supervisor, port_open
 
@@ -37,7 +38,6 @@ def _services(config: Config) -> list[tuple[Service, float]]:
     env["CLOUDSIM_INSTANCE_DIR"] = str(config.instance_dir)
     env["CLOUDSIM_REDIS_URL"] = config.effective_redis_url
     json_logs = config.log_format == "json"
-    quiet = ["--quiet"] if json_logs else []  # Celery's banner is no JSON line
     python = sys.executable
     services: list[tuple[Service, float]] = []
     if config.redis_url is None:
@@ -49,55 +49,8 @@ def _services(config: Config) -> list[tuple[Service, float]]:
         services.append(
             (Service("redis", argv, env, port_open("127.0.0.1", config.redis_port)), 15)
         )
-    log_level = config.log_level
-    services.append(
-        (
-            Service(
-                "worker",
-                [
-                    python,
-                    "-m",
-                    "celery",
-                    "-A",
-                    "cloudsim.worker",
-                    *quiet,
-                    "worker",
-                    "--loglevel",
-                    log_level,
-                    "--concurrency",
-                    str(config.worker_concurrency),
-                    "--queues",
-                    "cloudsim",
-                    "--hostname",
-                    "cloudsim@%h",
-                ],
-                env,
-            ),
-            0,
-        )
-    )
-    services.append(
-        (
-            Service(
-                "beat",
-                [
-                    python,
-                    "-m",
-                    "celery",
-                    "-A",
-                    "cloudsim.worker",
-                    *quiet,
-                    "beat",
-                    "--loglevel",
-                    log_level,
-                    "--schedule",
-                    str(config.instance_dir / "celerybeat-schedule"),
-                ],
-                env,
-            ),
-            0,
-        )
-    )
+    services.append((Service("worker", worker_argv(config), env), 0))
+    services.append((Service("beat", beat_argv(config), env), 0))
     host, port = _host_port(config.bind)
     tls = ["--certfile", config.tls_cert, "--keyfile", config.tls_key] if config.tls_cert else []
     # JSON: gunicorn's own lines as JSON, and the app logs each request (with its ids) itself
@@ -127,7 +80,7 @@ def _services(config: Config) -> list[tuple[Service, float]]:
                     str(config.web_threads),
                     *logs,
                     "--log-level",
-                    log_level.lower(),
+                    config.log_level.lower(),
                     *tls,
                     "cloudsim.wsgi:app",
                 ],

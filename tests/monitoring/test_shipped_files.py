@@ -15,6 +15,7 @@ from flask import Flask
 from prometheus_client.parser import text_string_to_metric_families
 
 from cloudsim.monitoring import heartbeats
+from provisioners.remote.operations.templates import MachineTemplates
 from tests.monitoring.support import measurable_season
 
 METRIC = re.compile(r"\bcloudsim_[a-z_]+\b")
@@ -99,3 +100,22 @@ def test_dashboard_panels_query_only_exported_metrics(shipped: Path, exported: s
         "cloudsim_worker_heartbeat_timestamp_seconds",
     ):
         assert family in used, family
+
+
+def test_the_cloudsim_kinds_unit_waits_for_readiness() -> None:
+    unit = MachineTemplates().render(
+        "cloudsim/cloudsim.service.j2",
+        {
+            "constellation": "team-a",
+            "env_file": "/etc/cloudsim/env",
+            "root": "/opt/cloudsim",
+            "venv": "/opt/cloudsim/venv",
+        },
+    )
+    lines = unit.splitlines()
+    assert "ExecStart=/opt/cloudsim/venv/bin/cloudsim up" in lines
+    # started means ready (the /readyz checks); a part still down is reported, not fatal
+    assert "ExecStartPost=-/opt/cloudsim/venv/bin/cloudsim status --wait 120" in lines
+    timeout = next(line for line in lines if line.startswith("TimeoutStartSec="))
+    assert int(timeout.split("=")[1]) > 120
+    assert "{#" not in unit and "#}" not in unit
