@@ -15,7 +15,7 @@ import redis
 from flask import Flask
 from prometheus_client.core import GaugeMetricFamily, HistogramMetricFamily, Metric
 from prometheus_client.registry import Collector
-from sqlalchemy import func, or_, select
+from sqlalchemy import ColumnElement, Float, case, cast, extract, func, or_, select
 
 from cloudsim.config import Config
 from cloudsim.extensions import db
@@ -46,6 +46,14 @@ LIVE_RUNS = (RunState.STARTING, RunState.RUNNING, RunState.STOPPING)
 
 def _seconds(later: datetime, earlier: datetime) -> float:
     return max(0.0, (later - earlier).total_seconds())
+
+
+def _duration_seconds() -> ColumnElement[float]:
+    """Return a job's finished_at - started_at in seconds, in the database's own SQL."""
+    if db.engine.dialect.name == "sqlite":
+        days = func.julianday(Job.finished_at) - func.julianday(Job.started_at)
+        return cast(days * 86400.0, Float)
+    return cast(extract("epoch", Job.finished_at - Job.started_at), Float)
 
 
 class CloudSimCollector(Collector):
@@ -110,20 +118,28 @@ class CloudSimCollector(Collector):
             "Wall time of finished jobs, from start to end, by kind",
             labels=["kind"],
         )
-        by_kind: dict[str, list[float]] = {}
-        for kind, started, finished in db.session.execute(
-            select(Job.kind, Job.started_at, Job.finished_at).where(
+        # One grouped query counts every bucket in the database: a season's tens of thousands
+        # of finished jobs never travel to Python.
+        finished = (
+            select(Job.kind.label("kind"), _duration_seconds().label("seconds"))
+            .where(
                 Job.state.in_((JobState.SUCCEEDED, JobState.FAILED)),
                 Job.started_at.is_not(None),
                 Job.finished_at.is_not(None),
             )
-        ):
-            if started is not None and finished is not None:  # the query says so; mypy cannot
-                by_kind.setdefault(kind, []).append(_seconds(finished, started))
-        for kind, durations in sorted(by_kind.items()):
-            buckets = [(str(b), sum(d <= b for d in durations)) for b in JOB_BUCKETS]
-            buckets.append(("+Inf", len(durations)))
-            histogram.add_metric([kind], buckets, sum(durations))
+            .subquery()
+        )
+        seconds = finished.c.seconds  # computed once a row, then compared with each bound
+        columns = [func.sum(case((seconds <= bound, 1), else_=0)) for bound in JOB_BUCKETS]
+        rows = db.session.execute(
+            select(finished.c.kind, func.count(), func.sum(seconds), *columns)
+            .group_by(finished.c.kind)
+            .order_by(finished.c.kind)
+        )
+        for kind, count, total, *within in rows:
+            buckets = [(str(b), int(n or 0)) for b, n in zip(JOB_BUCKETS, within, strict=True)]
+            buckets.append(("+Inf", int(count)))
+            histogram.add_metric([kind], buckets, max(0.0, float(total or 0.0)))
         return histogram
 
     def _runs(self) -> Iterator[Metric]:

@@ -37,14 +37,17 @@ class Season:
     constellation_id: int
 
 
-def measurable_season(team_name: str = "Metrics team", *, wall_seconds: float = 100.0) -> Season:
-    """Add a running run that has simulated half its wall time (real-time factor 0.5)."""
+def measurable_season(
+    team_name: str = "Metrics team", *, wall_seconds: float = 100.0, suffix: str = ""
+) -> Season:
+    """Add a running run that has simulated half its wall time (real-time factor 0.5); names
+    and ids end with suffix (several seasons in one database)."""
     now = utcnow()
     team = Team(name=team_name)
     db.session.add(team)
     db.session.flush()
     constellation = Constellation(
-        name="metrics-vrc",
+        name=f"metrics-vrc{suffix}",
         kind="vrc",
         provider="local",
         team_id=team.id,
@@ -88,7 +91,7 @@ def measurable_season(team_name: str = "Metrics team", *, wall_seconds: float = 
     db.session.add(run)
     db.session.add(
         TeamInstance(
-            name="team-instance-1",
+            name=f"team-instance-1{suffix}",
             team_id=team.id,
             constellation_id=constellation.id,
             state=InstanceState.UNREACHABLE,
@@ -97,7 +100,7 @@ def measurable_season(team_name: str = "Metrics team", *, wall_seconds: float = 
     )
     db.session.add(
         Job(
-            id="job-finished",
+            id=f"job-finished{suffix}",
             kind="diagnostics",
             state=JobState.SUCCEEDED,
             started_at=now - timedelta(seconds=12),
@@ -106,7 +109,7 @@ def measurable_season(team_name: str = "Metrics team", *, wall_seconds: float = 
     )
     db.session.add(
         Job(
-            id="job-stuck",
+            id=f"job-stuck{suffix}",
             kind="launch",
             state=JobState.QUEUED,
             created_at=now - timedelta(hours=1),

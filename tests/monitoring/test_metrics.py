@@ -48,7 +48,8 @@ def test_metrics_answer_a_configured_network(make_config: Callable[..., Config])
         assert client.get("/metrics").status_code == 403  # loopback is no longer listed
 
 
-def test_metrics_report_jobs_runs_machines_instances_and_the_outbox(app: Flask) -> None:
+def test_metrics_report_jobs_runs_machines_instances_and_the_outbox(any_db_app: Flask) -> None:
+    app = any_db_app
     season = measurable_season()
     heartbeats.note(app.config["CLOUDSIM"].effective_redis_url, "worker:cloudsim@box", at=1234.5)
     client = app.test_client()
