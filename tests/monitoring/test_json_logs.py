@@ -88,6 +88,11 @@ def test_web_and_job_lines_are_json_with_their_ids_and_no_secret(
         headers = {**token_for(admin), "X-Request-ID": "req-from-the-proxy"}
         issued = client.post("/api/v1/tokens", json={"name": "ci"}, headers=headers)
         assert issued.status_code == 201
+        assert issued.headers["X-Request-ID"] == "req-from-the-proxy"
+        forged = client.get("/healthz", headers={"X-Request-ID": "x" * 65})  # too long: replaced
+        assert (
+            len(forged.headers["X-Request-ID"]) == 32 and "x" not in forged.headers["X-Request-ID"]
+        )
         launched = client.post(
             "/api/v1/constellations",
             json={"name": "json-logs", "kind": "simple", "team_id": None},
