@@ -27,6 +27,7 @@ bench: install
 	$(BIN)/python -m bench.router
 	$(BIN)/python -m bench.run_logs
 	$(BIN)/python -m bench.supervision
+	$(BIN)/python -m bench.metrics
 	$(BIN)/python -m bench.federation
 	$(BIN)/python -m bench.viewer
 	$(BIN)/python -m bench.cli_start

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
 import secrets
@@ -122,6 +123,25 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_ARGON2_TIME_COST": Setting("3", "Argon2id passes when hashing a password"),
     "CLOUDSIM_ARGON2_MEMORY_KIB": Setting("65536", "Argon2id memory per password hash, KiB"),
     "CLOUDSIM_LOG_LEVEL": Setting("INFO", "Log level of the web server and workers"),
+    "CLOUDSIM_LOG_FORMAT": Setting(
+        "text",
+        "text, or json: one JSON object a line (request, user, job, run, constellation ids) from"
+        " the web server, the workers and the beat",
+    ),
+    "CLOUDSIM_METRICS_NETWORKS": Setting(
+        "127.0.0.0/8,::1/128",
+        "Comma-separated networks whose addresses may read GET /metrics without a token",
+    ),
+    "CLOUDSIM_METRICS_TOKEN": Setting(
+        "", "A bearer token that also opens GET /metrics (from anywhere); empty: none"
+    ),
+    "CLOUDSIM_READY_MIN_FREE_MB": Setting(
+        "1024", "GET /readyz fails when the instance folder's disk has less free than this"
+    ),
+    "CLOUDSIM_READY_OUTBOX_SECONDS": Setting(
+        "3600",
+        "GET /readyz fails when a finished run has waited this long in the portal outbox",
+    ),
     "CLOUDSIM_ARTIFACT_STORE": Setting(
         "local",
         "Where run logs are kept: local (a folder) or a libcloud storage provider "
@@ -226,6 +246,11 @@ class Config:
     argon2_time_cost: int
     argon2_memory_kib: int
     log_level: str
+    log_format: str
+    metrics_networks: tuple[str, ...]
+    metrics_token: str = field(repr=False)
+    ready_min_free_mb: int
+    ready_outbox_seconds: int
     artifact_store: str
     artifact_dir: Path
     artifact_container: str
@@ -259,6 +284,7 @@ class Config:
                 "admin_password",
                 "admin_token",
                 "artifact_secret",
+                "metrics_token",
             }
         )
         return f"Config({shown})"
@@ -350,6 +376,11 @@ class Config:
             argon2_time_cost=number("CLOUDSIM_ARGON2_TIME_COST"),
             argon2_memory_kib=number("CLOUDSIM_ARGON2_MEMORY_KIB"),
             log_level=get("CLOUDSIM_LOG_LEVEL").upper(),
+            log_format=_choice("CLOUDSIM_LOG_FORMAT", get, ("text", "json")),
+            metrics_networks=_networks("CLOUDSIM_METRICS_NETWORKS", get),
+            metrics_token=get("CLOUDSIM_METRICS_TOKEN"),
+            ready_min_free_mb=number("CLOUDSIM_READY_MIN_FREE_MB"),
+            ready_outbox_seconds=positive("CLOUDSIM_READY_OUTBOX_SECONDS"),
             artifact_store=get("CLOUDSIM_ARTIFACT_STORE").strip().lower(),
             artifact_dir=Path(get("CLOUDSIM_ARTIFACT_DIR") or instance_dir / "artifacts"),
             artifact_container=get("CLOUDSIM_ARTIFACT_CONTAINER"),
@@ -400,6 +431,18 @@ def _json_object(name: str, get: Callable[[str], str]) -> dict[str, object]:
     if not isinstance(value, dict):
         raise ConfigError(f"{name} must be a JSON object, got {get(name)!r}")
     return value
+
+
+def _networks(name: str, get: Callable[[str], str]) -> tuple[str, ...]:
+    """Return the comma-separated networks of a setting, each checked and normalised."""
+    found = []
+    for part in get(name).split(","):
+        if part.strip():
+            try:
+                found.append(str(ipaddress.ip_network(part.strip(), strict=False)))
+            except ValueError:
+                raise ConfigError(f"{name}: {part.strip()!r} is not a network") from None
+    return tuple(found)
 
 
 def _choice(name: str, get: Callable[[str], str], choices: tuple[str, ...]) -> str:

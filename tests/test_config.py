@@ -30,6 +30,8 @@ def test_defaults_generate_private_keys_once(tmp_path: Path) -> None:
         ("CLOUDSIM_WEB_WORKERS", "two", "CLOUDSIM_WEB_WORKERS must be a whole number"),
         ("CLOUDSIM_SECURE_COOKIES", "maybe", "CLOUDSIM_SECURE_COOKIES"),
         ("CLOUDSIM_ENCRYPTION_KEYS", "not-a-key", "malformed Fernet key"),
+        ("CLOUDSIM_LOG_FORMAT", "xml", "CLOUDSIM_LOG_FORMAT must be one of text, json"),
+        ("CLOUDSIM_METRICS_NETWORKS", "10.0.0.0/8,nowhere", "'nowhere' is not a network"),
     ],
 )
 def test_bad_values_are_named(tmp_path: Path, name: str, value: str, message: str) -> None:

@@ -128,6 +128,16 @@ def _register() -> None:
         "Run CloudSim on this machine until Ctrl-C: Redis (if needed), workers, beat, web.",
     )
     main.add_lazy_command("db", "cloudsim.cli.db:db", "Migrate the database schema.")
+    main.add_lazy_command(
+        "worker",
+        "cloudsim.cli.workers:worker",
+        "Run only a Celery worker (no web server, beat or Redis) against CLOUDSIM_* settings.",
+    )
+    main.add_lazy_command(
+        "beat",
+        "cloudsim.cli.workers:beat",
+        "Run only the beat (one per system) against CLOUDSIM_* settings.",
+    )
     for feature in features():
         feature.init_cli(main)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from cloudsim.extensions import db
 from cloudsim.launched_constellations.service import launch
 from cloudsim.models import Constellation, ConstellationState, Team
 from cloudsim.people.service import create_team, ensure_first_admin
+from cloudsim.runtime.celery_argv import beat_argv, worker_argv
 from cloudsim.runtime.redis_server import redis_command
 from cloudsim.runtime.supervisor import Service, Supervisor, port_open
 
@@ -38,6 +40,7 @@ def _services(config: Config) -> list[tuple[Service, float]]:
     env = dict(os.environ)
     env["CLOUDSIM_INSTANCE_DIR"] = str(config.instance_dir)
     env["CLOUDSIM_REDIS_URL"] = config.effective_redis_url
+    json_logs = config.log_format == "json"
     python = sys.executable
     services: list[tuple[Service, float]] = []
     if config.redis_url is None:
@@ -49,55 +52,16 @@ def _services(config: Config) -> list[tuple[Service, float]]:
         services.append(
             (Service("redis", argv, env, port_open("127.0.0.1", config.redis_port)), 15)
         )
-    log_level = config.log_level
-    services.append(
-        (
-            Service(
-                "worker",
-                [
-                    python,
-                    "-m",
-                    "celery",
-                    "-A",
-                    "cloudsim.worker",
-                    "worker",
-                    "--loglevel",
-                    log_level,
-                    "--concurrency",
-                    str(config.worker_concurrency),
-                    "--queues",
-                    "cloudsim",
-                    "--hostname",
-                    "cloudsim@%h",
-                ],
-                env,
-            ),
-            0,
-        )
-    )
-    services.append(
-        (
-            Service(
-                "beat",
-                [
-                    python,
-                    "-m",
-                    "celery",
-                    "-A",
-                    "cloudsim.worker",
-                    "beat",
-                    "--loglevel",
-                    log_level,
-                    "--schedule",
-                    str(config.instance_dir / "celerybeat-schedule"),
-                ],
-                env,
-            ),
-            0,
-        )
-    )
+    services.append((Service("worker", worker_argv(config), env), 0))
+    services.append((Service("beat", beat_argv(config), env), 0))
     host, port = _host_port(config.bind)
     tls = ["--certfile", config.tls_cert, "--keyfile", config.tls_key] if config.tls_cert else []
+    # JSON: gunicorn's own lines as JSON, and the app logs each request (with its ids) itself
+    logs = (
+        ["--logger-class", "cloudsim.monitoring.logs.JsonGunicornLogger"]
+        if json_logs
+        else ["--access-logfile", "-"]
+    )
     services.append(
         (
             Service(
@@ -119,14 +83,13 @@ def _services(config: Config) -> list[tuple[Service, float]]:
                     str(config.web_workers),
                     "--threads",
                     str(config.web_threads),
-                    "--access-logfile",
-                    "-",
+                    *logs,
                     "--log-level",
-                    log_level.lower(),
+                    config.log_level.lower(),
                     *tls,
                     "cloudsim.wsgi:app",
                 ],
-                env,
+                {**env, "PROMETHEUS_MULTIPROC_DIR": str(_metrics_dir(config))},
                 port_open(host, port),
             ),
             60,
@@ -142,6 +105,15 @@ def _control_socket(instance_dir: Path) -> list[str]:
     if len(os.fsencode(path)) > MAX_SOCKET_PATH:
         return ["--no-control-socket"]
     return ["--control-socket", str(path)]
+
+
+def _metrics_dir(config: Config) -> Path:
+    """Return an empty folder for the web processes' request timings (prometheus_client's
+    multiprocess mode: gunicorn's workers each write theirs, /metrics sums them)."""
+    folder = config.instance_dir / "metrics"
+    shutil.rmtree(folder, ignore_errors=True)  # counts of processes gone with a previous run
+    folder.mkdir(mode=0o700)
+    return folder
 
 
 DEMO_TEAM = "Demo team"

@@ -17,6 +17,7 @@ from sqlalchemy import Update, event, func, or_, update
 from sqlalchemy.orm import ORMExecuteState, Session
 from sqlalchemy.orm.attributes import set_committed_value
 
+from cloudsim import logcontext
 from cloudsim.errors import CloudSimError, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Job, JobState, utcnow
@@ -304,29 +305,36 @@ def run_job(self: object, job_id: str) -> str:
     body = JOB_KINDS.get(job.kind)
     heartbeat = _Heartbeat(job_id, max(1.0, lease / 4))
     heartbeat.start()
-    try:
-        if body is None:
-            raise CloudSimError(f"unknown job kind {job.kind!r}")
-        body(ctx, PAYLOADS[job.kind].from_job(job))
-    except Exception as exc:
-        db.session.rollback()
-        ctx.flush_reports()
-        ctx.line_sink()("", traceback.format_exc())
-        job = db.session.get(Job, job_id)
-        assert job is not None
-        reason = str(exc) if isinstance(exc, CloudSimError) else f"{type(exc).__name__}: {exc}"
-        job.error = ctx.masked(reason) or type(exc).__name__
-        job.state = JobState.FAILED
+    about = logcontext.about_target(job.target_type, job.target_id)
+    with logcontext.bound(job_id=job_id, **about):  # every line logged meanwhile names them
+        try:
+            _run_body(ctx, job, body)
+        except Exception as exc:
+            db.session.rollback()
+            ctx.flush_reports()
+            ctx.line_sink()("", traceback.format_exc())
+            job = db.session.get(Job, job_id)
+            assert job is not None
+            reason = str(exc) if isinstance(exc, CloudSimError) else f"{type(exc).__name__}: {exc}"
+            job.error = ctx.masked(reason) or type(exc).__name__
+            job.state = JobState.FAILED
+            job.finished_at = utcnow()
+            db.session.commit()  # the runner is the job's boundary: it commits the outcome
+            raise
+        finally:
+            heartbeat.stopped.set()
+            heartbeat.join()
+        ctx.log("done")
+        ctx.fold_reports_into(job)
+        job.state = JobState.SUCCEEDED
+        job.progress = 100
         job.finished_at = utcnow()
-        db.session.commit()  # the runner is the job's boundary: it commits the outcome
-        raise
-    finally:
-        heartbeat.stopped.set()
-        heartbeat.join()
-    ctx.log("done")
-    ctx.fold_reports_into(job)
-    job.state = JobState.SUCCEEDED
-    job.progress = 100
-    job.finished_at = utcnow()
-    db.session.commit()  # the body's changes, its last reports and the job's end, at once
-    return str(job.state)
+        db.session.commit()  # the body's changes, its last reports and the job's end, at once
+        return str(job.state)
+
+
+def _run_body(ctx: JobContext, job: Job, body: JobFunction | None) -> None:
+    """Run a job's body with its typed payload."""
+    if body is None:
+        raise CloudSimError(f"unknown job kind {job.kind!r}")
+    body(ctx, PAYLOADS[job.kind].from_job(job))

@@ -186,6 +186,12 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_team_instances.LaunchThrough", "POST"): (401, 403, 403, 403, 200),
     ("team_instances.launch_all", "POST"): (LOGIN, 403, 403, 403, 302),  # the defaults: vrc
     ("api_providers.ProviderSettings", "PUT"): (401, 403, 403, 403, 200),
+    # monitoring: health is public; readiness is public and tells no secret (no worker has
+    # been heard from here: 503); metrics answer by network or token, not by person: the
+    # test client calls from loopback (refusals elsewhere: tests/monitoring/test_metrics.py)
+    ("monitoring.healthz", "GET"): (200, 200, 200, 200, 200),
+    ("monitoring.readyz", "GET"): (503, 503, 503, 503, 503),
+    ("monitoring.metrics", "GET"): (200, 200, 200, 200, 200),
 }
 
 IGNORED_ENDPOINTS = {"static"}

@@ -128,6 +128,8 @@ def test_no_route_answers_500_to_garbage(app: Flask, people: dict[str, User | No
     headers = token_for(people["admin"])  # type: ignore[arg-type]
     garbage = {"name": "\x00" * 3, "email": "@@", "role": ["x"], "team": "abc", "page": "-5"}
     for rule in app.url_map.iter_rules():
+        if rule.endpoint == "monitoring.readyz":
+            continue  # its 503 is its answer ("not ready": no worker here), checked elsewhere
         if rule.endpoint == "static" or rule.arguments - {
             "team_id",
             "user_id",
