@@ -26,6 +26,7 @@ FEATURES = (
     "cloudsim.viewer",
     "cloudsim.team_instances",
     "cloudsim.portal",
+    "cloudsim.verification",
     "cloudsim.worlds",
 )
 
