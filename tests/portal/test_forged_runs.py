@@ -14,9 +14,10 @@ from flask import Flask
 from sqlalchemy import func, select
 
 from cloudsim.extensions import db
-from cloudsim.models import Artifact, PortalRefusal, Role, Run, TeamInstance, utcnow
+from cloudsim.models import Artifact, PortalRefusal, Role, Run, utcnow
 from cloudsim.portal.credentials import upload_token
 from tests.conftest import make_user, token_for
+from tests.portal.support import team_instance
 
 LOGS = {
     "score.jsonl": b'{"event": "checkpoint", "checkpoint": 1}\n',
@@ -28,10 +29,10 @@ LOGS = {
 
 @pytest.fixture
 def uploader(app: Flask) -> dict[str, Any]:
-    """A team, its open task (90 s timeout) and its instance's upload token, made through the
-    documented API."""
+    """A team and its open task (90 s timeout), made through the documented API, and its
+    instance's upload token."""
     client = app.test_client()
-    admin, officer = token_for(make_user(Role.ADMIN)), token_for(make_user(Role.OFFICER))
+    officer = token_for(make_user(Role.OFFICER))
     team = client.post("/api/v1/teams", json={"name": "Team A"}, headers=officer).json
     now = utcnow()
     task = client.post(
@@ -51,14 +52,8 @@ def uploader(app: Flask) -> dict[str, Any]:
         headers=officer,
     )
     assert task.status_code == 201, task.json
-    deployed = client.post(
-        "/api/v1/team-instances",
-        json={"name": "ti-a", "provider": "local", "team_id": team["id"]},
-        headers=admin,
-    )
-    assert deployed.status_code == 202, deployed.json
-    instance = db.session.get(TeamInstance, deployed.json[0]["instance"]["id"])
-    assert instance is not None
+    # the instance as a row: its upload token is what a deployed one is handed
+    instance = team_instance(team["id"], "ti-a", "https://127.0.0.1:1/")
     headers = {"Authorization": f"Bearer {upload_token(instance)}"}
     db.session.commit()
     return {"task": task.json[0], "headers": headers, "officer": officer}
