@@ -29,6 +29,7 @@ bench: install
 	$(BIN)/python -m bench.supervision
 	$(BIN)/python -m bench.federation
 	$(BIN)/python -m bench.viewer
+	$(BIN)/python -m bench.verification
 	$(BIN)/drcsim bench
 
 clean:
