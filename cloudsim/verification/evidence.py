@@ -31,7 +31,7 @@ class Held(CloudSimError):
 
 
 class ReplayFailed(CloudSimError):
-    """The replay itself could not run (timeout, crash): nothing is decided, the job fails."""
+    """The replay itself could not run (timeout, crash): it proves nothing either way."""
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,8 @@
 
 It takes the run's id, copies its logs out of the store (each checked against its recorded
 checksum) beside the world document the master holds, commits, replays the command log with
-`drcsim replay` in its own process, and records `verified` or `held` with the reason. It
+`drcsim replay` in its own process, and records `verified` or `held` with the reason (also
+when the replay could not run at all: killed, or past its time limit). It
 changes nothing until that last step, so a job resumed after a crash simply starts over; any
 worker runs it, and as many at once as the workers have processes.
 """
@@ -22,7 +23,7 @@ from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.models import Run, Verification
 from cloudsim.verification import service
 from cloudsim.verification.compare import Claim, claimed_events, differences, score_log_claim
-from cloudsim.verification.evidence import Held, gather, replay, work_folder
+from cloudsim.verification.evidence import Held, ReplayFailed, gather, replay, work_folder
 from cloudsim.worlds.service import world_for_run
 
 
@@ -69,6 +70,9 @@ def verify_run_job(ctx: JobContext, job: RunJob) -> None:
             verdict, reason = Verification.HELD, "; ".join(found)
     except Held as held:
         verdict, reason = Verification.HELD, str(held)
+    except ReplayFailed as failed:
+        # not proven either way: an officer looks (and can accept) rather than it waiting forever
+        verdict, reason = Verification.HELD, f"the replay could not run: {failed}"
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     ctx.stage("decide", 95)
