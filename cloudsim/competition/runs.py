@@ -27,6 +27,7 @@ from cloudsim.models import (
     Team,
     utcnow,
 )
+from cloudsim.verification import service as verification
 from cloudsim.web.downloads import attachment
 
 LIVE = (RunState.STARTING, RunState.RUNNING, RunState.STOPPING)
@@ -181,8 +182,6 @@ def leaderboard(actor: Actor) -> list[Standing]:
     """Return the ranking of every team over their finished runs (not those an officer
     invalidated nor those held for review; unverified ones as CLOUDSIM_RANK_UNVERIFIED says),
     as much as the actor may see."""
-    from cloudsim.verification import service as verification  # a feature the ranking obeys
-
     config = current_app.config["CLOUDSIM"]
     policy = config.leaderboard_for_users
     team_user = actor is not None and not actor.has_role(Role.OFFICER)
