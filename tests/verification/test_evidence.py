@@ -16,11 +16,12 @@ from cloudsim.auth.policy import SYSTEM
 from cloudsim.competition.artifacts import LogStore, artifact_for
 from cloudsim.extensions import db
 from cloudsim.jobs.service import run_here
-from cloudsim.models import Job, JobState, Run, Task, Verification
+from cloudsim.models import Job, JobState, Role, Run, Task, Verification
 from cloudsim.people.service import create_team
 from cloudsim.verification import service
 from cloudsim.worlds.service import update_world
 from tests.competition.support import open_task
+from tests.conftest import log_in, make_user
 from tests.verification.support import TIMEOUT_S, WORLD_NAME, master_run, simulate
 
 
@@ -104,3 +105,19 @@ def test_a_run_is_replayed_in_the_world_this_cloudsim_holds(
         "the replay of its command log diverged: the world document differs from the one the "
         "run was built from"
     )
+
+
+def test_the_jobs_page_shows_the_verification_queue(
+    app: Flask, real_logs: dict[str, bytes], tmp_path: Path
+) -> None:
+    team = create_team(SYSTEM, "Team A")
+    for n in range(2):
+        task = open_task(team.id, timeout_s=TIMEOUT_S, name=f"Walking {n}")
+        master_run(task, real_logs, tmp_path / str(n))
+    assert service.sweep() == 2
+    db.session.commit()  # queued; no worker here takes them
+    client = app.test_client()
+    log_in(client, make_user(Role.OFFICER))
+    page = client.get("/jobs").get_data(as_text=True)
+    row = page[page.index('data-kind="run.verify"') :].split("</tr>")[0]
+    assert '<td class="queued">2</td>' in row and '<td class="running">0</td>' in row
