@@ -7,9 +7,10 @@ or `accepted` by an officer after being held; a held run is not ranked.
 from __future__ import annotations
 
 from datetime import timedelta
+from typing import TYPE_CHECKING
 
-import click
-from flask import Flask
+if TYPE_CHECKING:
+    from flask import Flask
 
 SWEEP_EVERY = timedelta(seconds=10)
 
@@ -22,6 +23,6 @@ def init_app(app: Flask) -> None:
     schedule_task(app, service.SWEEP, SWEEP_EVERY)
 
 
-def init_cli(cli: click.Group) -> None:
-    """Add this feature's commands to `cloudsim`."""
-    del cli  # none: `cloudsim` runs no replay itself; the workers do
+def init_cli(cli: object) -> None:
+    """Add this feature's commands to `cloudsim`: none (the workers replay, not the CLI)."""
+    del cli
