@@ -188,10 +188,6 @@ FORGERIES: dict[str, tuple[Callable[[dict[str, Any]], None], str]] = {
         lambda r: r.update(logs=[log for log in r["logs"] if log["filename"] != "commands.jsonl"]),
         "must declare the logs it is re-simulated from; missing: commands.jsonl",
     ),
-    "seconds left that the timeout does not leave": (
-        _set("seconds_left", 80.0),
-        "80 seconds left, but 90 s less 60 simulated seconds leaves 30",
-    ),
     "complete without every checkpoint": (
         _set("end_reason", "complete"),
         "ended complete with 1 of the world's 4 checkpoints",

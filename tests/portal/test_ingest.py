@@ -237,7 +237,8 @@ def test_results_the_instance_may_not_send_are_refused_and_shown_to_officers(
     assert out_of_place.status_code == 409 and out_of_place.json["received"] == 0
     with portal.on_master():
         assert db.session.scalar(select(func.count(PortalRefusal.id))) == 4
-        assert db.session.scalar(select(func.count(Artifact.id))) == 0
+        stored = select(func.count(Artifact.id)).where(Artifact.filename == "score.jsonl")
+        assert db.session.scalar(stored) == 0  # (the empty logs it declared are stored at once)
 
 
 def test_an_invalidated_run_leaves_the_ranking_and_the_leaderboard_says_so(
