@@ -31,6 +31,7 @@ bench: install
 	$(BIN)/python -m bench.federation
 	$(BIN)/python -m bench.viewer
 	$(BIN)/python -m bench.cli_start
+	$(BIN)/python -m bench.verification
 	$(BIN)/drcsim bench
 
 clean:

@@ -142,10 +142,14 @@ def record(uploader: Uploader, task_id: int, start: datetime, name: str) -> dict
 
 
 def small_logs(log_seconds: int = 1800) -> list[Log]:
-    """Return the logs every run carries: its score log and its bandwidth log."""
+    """Return the logs every run carries: its score log and its bandwidth log, and (tiny
+    here) the logs a finished run must declare to be re-simulated."""
     return [
         Log("score.jsonl", "score", score_log(CHECKPOINTS).encode()),
         Log("bandwidth.jsonl", "bandwidth", bandwidth_log(log_seconds).encode()),
+        Log("commands.jsonl", "commands", b""),
+        Log("meta.json", "meta", b"{}\n"),
+        Log("state.msgpack", "state", b""),
     ]
 
 

@@ -194,6 +194,11 @@ SETTINGS: dict[str, Setting] = {
         "On a master: how long after its task's window an uploaded run may have ended (its stop"
         " job collecting logs) before it is refused",
     ),
+    "CLOUDSIM_RANK_UNVERIFIED": Setting(
+        "true",
+        "Whether a finished run ranks before its replay verified it (marked unverified on the"
+        " leaderboard); false: only verified or officer-accepted runs rank",
+    ),
     "CLOUDSIM_VIEWER_LIVE_HZ": Setting(
         "10", "Frames per simulated second a live 3D viewer receives (the relay's rate)"
     ),
@@ -267,6 +272,7 @@ class Config:
     portal_retry_seconds: int
     portal_window_grace_seconds: int
     portal_staging_hours: int
+    rank_unverified: bool
     viewer_live_hz: int
     viewer_live_delay_ms: int
     viewer_poll_ms: int
@@ -399,6 +405,7 @@ class Config:
             portal_retry_seconds=positive("CLOUDSIM_PORTAL_RETRY_SECONDS"),
             portal_window_grace_seconds=number("CLOUDSIM_PORTAL_WINDOW_GRACE_SECONDS"),
             portal_staging_hours=positive("CLOUDSIM_PORTAL_STAGING_HOURS"),
+            rank_unverified=_flag("CLOUDSIM_RANK_UNVERIFIED", get),
             viewer_live_hz=number("CLOUDSIM_VIEWER_LIVE_HZ"),
             viewer_live_delay_ms=number("CLOUDSIM_VIEWER_LIVE_DELAY_MS"),
             viewer_poll_ms=number("CLOUDSIM_VIEWER_POLL_MS"),
@@ -450,6 +457,13 @@ def _choice(name: str, get: Callable[[str], str], choices: tuple[str, ...]) -> s
     if value not in choices:
         raise ConfigError(f"{name} must be one of {', '.join(choices)}, got {value!r}")
     return value
+
+
+def _flag(name: str, get: Callable[[str], str]) -> bool:
+    try:
+        return _bool(get(name))
+    except ValueError as exc:
+        raise ConfigError(f"{name}: {exc}") from None
 
 
 def _instance_secret(path: Path, generate: object) -> str:

@@ -28,6 +28,7 @@ FEATURES = (
     "cloudsim.viewer",
     "cloudsim.team_instances",
     "cloudsim.portal",
+    "cloudsim.verification",
     "cloudsim.worlds",
     "cloudsim.monitoring",
 )

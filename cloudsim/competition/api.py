@@ -161,6 +161,17 @@ class RunSchema(Schema):
         allow_none=True, metadata={"description": "set: an officer invalidated it, not ranked"}
     )
     invalid_reason = fields.Str(allow_none=True)
+    verification = fields.Str(
+        allow_none=True,
+        metadata={
+            "description": "what re-simulating the run from its logs found: verifying, verified, "
+            "held (for review; not ranked), accepted (by an officer); null: not verified yet"
+        },
+    )
+    verification_reason = fields.Str(
+        allow_none=True, metadata={"description": "why the run is held"}
+    )
+    verified_at = fields.DateTime(allow_none=True)
     upload = UploadField(
         RunUploadSchema,
         allow_none=True,
@@ -186,6 +197,15 @@ class StandingSchema(Schema):
     seconds_left = fields.Float()
     invalidated = fields.Int(
         metadata={"description": "the team's finished runs an officer invalidated: not ranked"}
+    )
+    unverified = fields.Int(
+        metadata={
+            "description": "of the team's ranked runs, those not verified by replay yet "
+            "(CLOUDSIM_RANK_UNVERIFIED)"
+        }
+    )
+    held = fields.Int(
+        metadata={"description": "the team's finished runs held for review: not ranked"}
     )
 
 

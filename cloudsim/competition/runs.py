@@ -27,6 +27,7 @@ from cloudsim.models import (
     Team,
     utcnow,
 )
+from cloudsim.verification import service as verification
 from cloudsim.web.downloads import attachment
 
 LIVE = (RunState.STARTING, RunState.RUNNING, RunState.STOPPING)
@@ -179,8 +180,10 @@ def live_run(team_id: int) -> Run | None:
 
 def leaderboard(actor: Actor) -> list[Standing]:
     """Return the ranking of every team over their finished runs (not those an officer
-    invalidated), as much as the actor may see."""
-    policy = current_app.config["CLOUDSIM"].leaderboard_for_users
+    invalidated nor those held for review; unverified ones as CLOUDSIM_RANK_UNVERIFIED says),
+    as much as the actor may see."""
+    config = current_app.config["CLOUDSIM"]
+    policy = config.leaderboard_for_users
     team_user = actor is not None and not actor.has_role(Role.OFFICER)
     if team_user and policy == "none":
         raise Forbidden("the leaderboard is shown to officers only")
@@ -200,7 +203,11 @@ def leaderboard(actor: Actor) -> list[Standing]:
             Task.timeout_s,
         )
         .join(Task, Run.task_id == Task.id)
-        .where(Run.state == RunState.FINISHED, Run.invalidated_at.is_(None))
+        .where(
+            Run.state == RunState.FINISHED,
+            Run.invalidated_at.is_(None),
+            verification.ranks(config),
+        )
     )
     for run in finished:
         results[(run.team_id, names[run.team_id])].append(
@@ -220,7 +227,18 @@ def leaderboard(actor: Actor) -> list[Standing]:
             .group_by(Run.team_id)
         ).all()
     )
-    standings = rank(results, invalidated)
+    counted = (Run.state == RunState.FINISHED, Run.invalidated_at.is_(None))
+    unverified, held = (
+        dict(
+            db.session.execute(  # type: ignore[arg-type]
+                select(Run.team_id, func.count()).where(*counted, which).group_by(Run.team_id)
+            ).all()
+        )
+        for which in (verification.unverified(), verification.held())
+    )
+    if not config.rank_unverified:
+        unverified = {}  # not ranked: nothing on the board is unverified
+    standings = rank(results, invalidated, unverified=unverified, held=held)
     if team_user and policy == "own":
         assert actor is not None
         standings = [s for s in standings if s.team_id == actor.team_id]

@@ -5,7 +5,8 @@ A run's score comes from its score log, read by drcsim's own reader (drcsim.rund
 Ranking: most checkpoints first; ties broken by the largest share of uplink bits left over
 all the team's runs, then by the most seconds left (summed over runs that reached every
 checkpoint: time left is only worth something once the task is done), then by name.
-Runs an officer invalidated are not given to the ranking at all; a standing only counts them.
+Runs an officer invalidated, and runs held for review by verification, are not given to the
+ranking at all; a standing only counts them (and the ranked runs not verified yet).
 """
 
 from __future__ import annotations
@@ -43,6 +44,8 @@ class Standing:
     uplink_share_left: float
     seconds_left: float
     invalidated: int = 0  # the team's finished runs an officer invalidated (not counted)
+    unverified: int = 0  # of its ranked runs, those whose replay has not verified them yet
+    held: int = 0  # the team's finished runs held for review (not counted until accepted)
 
 
 def standing_figures(results: Iterable[RunResult]) -> tuple[int, int, float, float]:
@@ -60,10 +63,15 @@ def standing_figures(results: Iterable[RunResult]) -> tuple[int, int, float, flo
 
 
 def rank(
-    teams: dict[tuple[int, str], list[RunResult]], invalidated: dict[int, int] | None = None
+    teams: dict[tuple[int, str], list[RunResult]],
+    invalidated: dict[int, int] | None = None,
+    *,
+    unverified: dict[int, int] | None = None,
+    held: dict[int, int] | None = None,
 ) -> list[Standing]:
-    """Order teams by the VRC rules; equal figures share a rank. `invalidated` counts each
-    team's runs left out (shown beside its standing, never ranked)."""
+    """Order teams by the VRC rules; equal figures share a rank. `invalidated` and `held` count
+    each team's runs left out, `unverified` its ranked runs not verified yet (shown beside its
+    standing)."""
     rows = []
     for (team_id, name), results in teams.items():
         runs, checkpoints, share, seconds = standing_figures(results)
@@ -87,6 +95,8 @@ def rank(
                 uplink_share_left=share,
                 seconds_left=seconds,
                 invalidated=(invalidated or {}).get(team_id, 0),
+                unverified=(unverified or {}).get(team_id, 0),
+                held=(held or {}).get(team_id, 0),
             )
         )
     return standings

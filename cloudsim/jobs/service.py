@@ -10,7 +10,7 @@ from datetime import timedelta
 from celery import shared_task
 from flask import current_app
 from kombu.exceptions import OperationalError
-from sqlalchemy import Select, event, or_, select
+from sqlalchemy import Select, event, func, or_, select
 from sqlalchemy.orm import Session
 
 from cloudsim.audit.service import record
@@ -130,6 +130,20 @@ def visible_jobs(actor: Actor, *, state: str | None = None) -> Select[Job]:
             names = ", ".join(s.value for s in JobState)
             raise InvalidInput(f"unknown job state {state!r}; choose one of {names}") from None
     return query
+
+
+def queue_depths(actor: Actor) -> dict[str, dict[str, int]]:
+    """Return per kind how many jobs the actor may see are queued and running (the queues)."""
+    waiting = visible_jobs(actor).where(Job.state.in_((JobState.QUEUED, JobState.RUNNING)))
+    counted = (
+        select(Job.kind, Job.state, func.count())
+        .where(Job.id.in_(waiting.with_only_columns(Job.id).order_by(None)))
+        .group_by(Job.kind, Job.state)
+    )
+    depths: dict[str, dict[str, int]] = {}
+    for kind, state, count in db.session.execute(counted):
+        depths.setdefault(kind, {"queued": 0, "running": 0})[state.value] = count
+    return dict(sorted(depths.items()))
 
 
 def lost_jobs() -> list[Job]:

@@ -9,7 +9,7 @@ from flask_login import current_user
 from cloudsim.auth.forms import ConfirmForm
 from cloudsim.auth.policy import role_required
 from cloudsim.extensions import db
-from cloudsim.jobs.service import get_job, start_maintenance, visible_jobs
+from cloudsim.jobs.service import get_job, queue_depths, start_maintenance, visible_jobs
 from cloudsim.models import Job, Role
 from cloudsim.web.inputs import query_int
 
@@ -46,7 +46,13 @@ def index() -> ResponseReturnValue:
     state = request.args.get("state") or None
     query = visible_jobs(current_user, state=state)
     jobs = db.paginate(query, page=page, per_page=PAGE_SIZE, error_out=False)
-    return render_template("jobs/index.html", jobs=jobs, state=state, confirm=ConfirmForm())
+    return render_template(
+        "jobs/index.html",
+        jobs=jobs,
+        state=state,
+        queues=queue_depths(current_user),
+        confirm=ConfirmForm(),
+    )
 
 
 @bp.route("/jobs/diagnostics", methods=["POST"])

@@ -2,7 +2,14 @@
 
 from cloudsim.models.audit import AuditEvent
 from cloudsim.models.base import Base, utcnow
-from cloudsim.models.competition import Artifact, Run, RunState, ScoreEvent, Task
+from cloudsim.models.competition import (
+    Artifact,
+    Run,
+    RunState,
+    ScoreEvent,
+    Task,
+    Verification,
+)
 from cloudsim.models.jobs import Job, JobState
 from cloudsim.models.machines import Constellation, ConstellationState, Machine, MachineState
 from cloudsim.models.people import ApiToken, LoginSession, Role, SshKey, Team, User
@@ -38,6 +45,7 @@ __all__ = [
     "TeamInstance",
     "UploadState",
     "User",
+    "Verification",
     "World",
     "utcnow",
 ]

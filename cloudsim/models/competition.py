@@ -62,6 +62,15 @@ class RunState(enum.StrEnum):
     ERROR = "error"
 
 
+class Verification(enum.StrEnum):
+    """What re-simulating a finished run from its own logs found (not its life cycle)."""
+
+    VERIFYING = "verifying"  # queued or under way
+    VERIFIED = "verified"  # the replay reproduced the score log and the final state
+    HELD = "held"  # held for review: something did not match (the reason says what)
+    ACCEPTED = "accepted"  # held, then accepted by an officer (audited)
+
+
 # The one run of a task that is live or counts (finished, not invalidated).
 LIVE_OR_COUNTED = (
     "state IN ('starting', 'running', 'stopping') "
@@ -130,6 +139,10 @@ class Run(Base):
     officer_note: Mapped[str | None] = mapped_column(Text)
     invalidated_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     invalid_reason: Mapped[str | None] = mapped_column(Text)
+    # re-simulation of the finished run from its logs (cloudsim.verification); None: not yet
+    verification: Mapped[Verification | None] = mapped_column(str_enum(Verification), index=True)
+    verification_reason: Mapped[str | None] = mapped_column(Text)  # why held, or accepted
+    verified_at: Mapped[datetime | None] = mapped_column(UTCDateTime)  # when it was decided
 
     task: Mapped[Task] = relationship(back_populates="runs")
     team: Mapped[Team] = relationship()

@@ -31,6 +31,7 @@ from cloudsim.errors import CloudSimError, Conflict, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import Artifact, Run, RunState, ScoreEvent, Task, TeamInstance, utcnow
 from cloudsim.portal import staging
+from cloudsim.verification.service import request_verification
 from cloudsim.web.inputs import as_id
 
 TASK_KEY = re.compile(r"^m([0-9]{1,12})$")  # the master's task, as its instances name it
@@ -159,9 +160,13 @@ def receive_run(instance: TeamInstance, remote_id: int, record_: dict[str, Any])
     existing = uploaded_run(instance, remote_id)
     if existing is not None:
         return existing
+    # here, not at the top: the figures' checks raise this module's Refused
+    from cloudsim.portal.plausibility import check_figures
+
     config: Config = current_app.config["CLOUDSIM"]
     task = _task_for(instance, record_)
     _check_window(task, record_, config)
+    check_figures(task, record_)
     twin = _check_once(task, record_, instance, remote_id)
     if twin is not None:
         return twin
@@ -324,6 +329,8 @@ def _store(run: Run, log: dict[str, Any], part: Path, checksum: str) -> None:
     if all(artifact_for(run, other["filename"]) for other in run.upload_manifest or ()):
         run.logs_complete_at = utcnow()
         staging.discard_run(current_app.config["CLOUDSIM"], run.id)  # its folder, now empty
+        db.session.flush()
+        request_verification(run.id)  # now, not at the next sweep
 
 
 def complete(instance: TeamInstance, remote_id: int) -> Run:

@@ -151,14 +151,20 @@ class Refusals(MethodView):
 class RunReview(MethodView):
     @blp.arguments(ReviewSchema)
     @blp.response(200, RunSchema)
-    @blp.alt_response(409, description="reinstating while another finished run of the task counts")
+    @blp.alt_response(
+        409,
+        description="reinstating while another finished run of the task counts; accepting a "
+        "run that is not held",
+    )
     def patch(self, data: dict[str, Any], run_id: int) -> Any:
         """Set an officer's note on a run, invalidate it (`reason` required: it no longer
-        counts in the ranking) or count it again (officers; audited)."""
+        counts in the ranking) or count it again, or accept a run held for review (officers;
+        audited)."""
         return review.review_run(
             caller(),
             run_id,
             note=data["note"] if "note" in data else ...,
             invalidated=data.get("invalidated"),
             reason=data.get("reason"),
+            accepted=data.get("accepted"),
         )

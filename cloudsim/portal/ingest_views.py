@@ -26,7 +26,10 @@ class ReviewForm(FlaskForm):
 
     note = TextAreaField("Note", validators=[Optional(), Length(max=review.MAX_NOTE)])
     invalidated = BooleanField("Invalidated (does not count in the ranking)")
-    reason = TextAreaField("Why invalidated", validators=[Optional(), Length(max=review.MAX_NOTE)])
+    accepted = BooleanField("Accept this run held for review (it is ranked again)")
+    reason = TextAreaField(
+        "Why invalidated, or accepted", validators=[Optional(), Length(max=review.MAX_NOTE)]
+    )
 
 
 @bp.app_template_global()
@@ -67,6 +70,7 @@ def review_run(run_id: int) -> ResponseReturnValue:
             note=form.note.data,
             invalidated=bool(form.invalidated.data),
             reason=form.reason.data,
+            accepted=bool(form.accepted.data),
         )
     except (InvalidInput, Conflict) as exc:
         db.session.rollback()

@@ -14,8 +14,9 @@ from sqlalchemy import Select, select
 
 from cloudsim.auth.policy import Actor
 from cloudsim.extensions import db
-from cloudsim.models import Role, Run, RunState, Task, Team, TeamInstance
+from cloudsim.models import Role, Run, RunState, Task, Team, TeamInstance, Verification
 from cloudsim.models.team_instances import InstanceState
+from cloudsim.verification.service import label
 
 MASTER = "master"  # the source of a run finished on this CloudSim itself
 GONE = "a removed team instance"  # uploaded by an instance whose row was deleted since
@@ -47,11 +48,17 @@ class ResultRow:
     invalidated: bool
     invalid_reason: str | None
     officer_note: str | None
+    verification: str  # as shown: unverified, verifying, verified, held for review, accepted ...
+    verification_reason: str | None
 
     @property
     def scoring(self) -> bool:
-        """Return True when the run counts: finished and not invalidated."""
-        return self.state == RunState.FINISHED.value and not self.invalidated
+        """Return True when the run counts: finished, not invalidated, not held for review."""
+        return (
+            self.state == RunState.FINISHED.value
+            and not self.invalidated
+            and self.verification != label(Verification.HELD)
+        )
 
     @property
     def uplink_bits_banked(self) -> int:
@@ -97,6 +104,8 @@ def _columns() -> Select[Any]:
             Run.invalidated_at,
             Run.invalid_reason,
             Run.officer_note,
+            Run.verification,
+            Run.verification_reason,
         )
         .join(Task, Run.task_id == Task.id)
         .join(Team, Run.team_id == Team.id)
@@ -125,15 +134,20 @@ def results(actor: Actor, team_id: int | None = None) -> list[ResultRow]:
         uploaded = values.pop("remote_run_id") is not None
         values["source"] = values["source"] or (GONE if uploaded else MASTER)
         values["invalidated"] = values.pop("invalidated_at") is not None
+        values["verification"] = label(values["verification"])
         rows.append(ResultRow(**values))
     return rows
 
 
 def scoring_run_ids(actor: Actor) -> Select[Any]:
     """Return the query of the ids of the runs that count (`ResultRow.scoring`: finished, not
-    invalidated) the actor may see, in `results`' order (for paging them)."""
+    invalidated, not held) the actor may see, in `results`' order (for paging them)."""
     query = select(Run.id).join(Team, Run.team_id == Team.id)
-    query = query.where(Run.state == RunState.FINISHED, Run.invalidated_at.is_(None))
+    query = query.where(
+        Run.state == RunState.FINISHED,
+        Run.invalidated_at.is_(None),
+        Run.verification.is_distinct_from(Verification.HELD),
+    )
     return _visible(query, actor)
 
 

@@ -1,5 +1,6 @@
 """Officers' side of results integrity: what the portal refused, and their word on a run
-(a note, an invalidation that takes it out of the ranking), every change audited."""
+(a note, an invalidation that takes it out of the ranking, the acceptance of a run its
+verification held), every change audited."""
 
 from __future__ import annotations
 
@@ -13,7 +14,15 @@ from cloudsim.auth.policy import Actor, require_role
 from cloudsim.competition.runs import get_run
 from cloudsim.errors import Conflict, InvalidInput
 from cloudsim.extensions import db
-from cloudsim.models import PortalRefusal, Role, Run, RunState, TeamInstance, utcnow
+from cloudsim.models import (
+    PortalRefusal,
+    Role,
+    Run,
+    RunState,
+    TeamInstance,
+    Verification,
+    utcnow,
+)
 from cloudsim.portal.ingest import Refused, counted_run
 
 MAX_NOTE = 2000
@@ -62,6 +71,25 @@ def _check_counted_alone(run: Run) -> None:
         )
 
 
+def _accept(actor: Actor, run: Run, why: str | None) -> None:
+    """Accept a run its verification held: it ranks again (the held reason is kept)."""
+    if run.verification is Verification.ACCEPTED:
+        return
+    if run.verification is not Verification.HELD:
+        shown = run.verification.value if run.verification else "not verified yet"
+        raise Conflict(f"run {run.id} is not held for review ({shown}): nothing to accept")
+    run.verification, run.verified_at = Verification.ACCEPTED, utcnow()
+    record(
+        "run.accept",
+        actor,
+        target_type="run",
+        target_id=run.id,
+        team_id=run.team_id,
+        held_for=run.verification_reason,
+        reason=why,
+    )
+
+
 def review_run(
     actor: Actor,
     run_id: int,
@@ -69,8 +97,10 @@ def review_run(
     note: Any = ...,
     invalidated: bool | None = None,
     reason: str | None = None,
+    accepted: bool | None = None,
 ) -> Run:
-    """Set an officer's note on a run, or invalidate it (with a reason) or count it again."""
+    """Set an officer's note on a run, invalidate it (with a reason) or count it again, or
+    accept a run held for review (it is ranked again)."""
     require_role(actor, Role.OFFICER, "review runs")
     run = get_run(actor, run_id)
     if note is not ...:
@@ -103,5 +133,7 @@ def review_run(
         _check_counted_alone(run)
         run.invalidated_at, run.invalid_reason = None, None
         record("run.reinstate", actor, target_type="run", target_id=run.id, team_id=run.team_id)
+    if accepted:
+        _accept(actor, run, _text(reason, "the reason"))
     db.session.flush()
     return run

@@ -115,4 +115,10 @@ class ReviewSchema(Schema):
     invalidated = fields.Bool(
         metadata={"description": "true: the run no longer counts (give a reason); false: again"}
     )
+    accepted = fields.Bool(
+        metadata={
+            "description": "true: accept a run its verification held for review (it is ranked "
+            "again; `reason` is recorded in the audit log)"
+        }
+    )
     reason = fields.Str(validate=validate.Length(max=2000))

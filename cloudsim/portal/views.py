@@ -77,7 +77,9 @@ def _team_page(team_id: int) -> ResponseReturnValue:
 @login_required
 def leaderboard() -> ResponseReturnValue:
     return render_template(
-        "portal/leaderboard.html", standings=run_service.leaderboard(current_user)
+        "portal/leaderboard.html",
+        standings=run_service.leaderboard(current_user),
+        rank_unverified=current_app.config["CLOUDSIM"].rank_unverified,
     )
 
 

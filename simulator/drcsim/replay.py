@@ -8,8 +8,10 @@ from typing import Any
 
 from drcsim.engine import RunOptions, Simulation
 from drcsim.errors import ReplayMismatch
+from drcsim.protocol import check_command
 from drcsim.rundir import WORLD, read_final, read_meta
 from drcsim.runlog import read_commands, read_states, state_digest
+from drcsim.scene import TIMESTEP
 from drcsim.worlds import read_world_file
 
 
@@ -21,7 +23,15 @@ class ReplayResult:
     states_checked: int
     final_digest: str
     score: int
-    end_reason: str | None
+    end_reason: str | None  # None: the run did not end by itself (stopped or closed from outside)
+    falls: int = 0
+    # the scorer's checkpoint and fall events, as the replay produced them (no wall time)
+    events: tuple[dict[str, Any], ...] = ()
+
+    @property
+    def sim_seconds(self) -> float:
+        """Return the simulated time the replay reached."""
+        return round(self.steps * TIMESTEP, 6)
 
     def as_dict(self) -> dict[str, Any]:
         """Return the result as plain data."""
@@ -32,6 +42,9 @@ class ReplayResult:
             "final_state_sha256": self.final_digest,
             "score": self.score,
             "end_reason": self.end_reason,
+            "falls": self.falls,
+            "sim_seconds": self.sim_seconds,
+            "events": list(self.events),
         }
 
 
@@ -67,13 +80,26 @@ def replay(log_dir: Path) -> ReplayResult:
     try:
         for step, command in read_commands(log_dir):
             advance_to(step)
-            sim.apply_command(command)
+            # a command log is evidence from outside: checked as the server checked it live
+            sim.apply_command(check_command(command))
         advance_to(int(final["step"]))
         digest = state_digest(sim.state_vector())
         if sim.step_count != final["step"] or digest != final["state_sha256"]:
             raise ReplayMismatch(f"final state differs (step {sim.step_count} vs {final['step']})")
+        kept = ("event", "checkpoint", "falls", "sim_time")
+        events = tuple(
+            {key: value for key, value in event.items() if key in kept}
+            for event in sim.scorer.events
+            if event["event"] in ("checkpoint", "fall")
+        )
         return ReplayResult(
-            sim.step_count, checked, digest, sim.scorer.reached, sim.scorer.end_reason
+            sim.step_count,
+            checked,
+            digest,
+            sim.scorer.reached,
+            sim.scorer.end_reason,
+            sim.scorer.falls,
+            events,
         )
     finally:
         sim.client.disconnect()

@@ -23,6 +23,7 @@ from cloudsim.models import (
 )
 from cloudsim.models.team_instances import InstanceState
 from cloudsim.portal.credentials import upload_token
+from cloudsim.portal.plausibility import PROOF_LOGS
 from tests.competition.support import open_task, store_log
 from tests.support.season import bandwidth_log, score_log
 
@@ -136,10 +137,22 @@ def uploader(
         "seconds_left": 0.0,
         "started_at": started.isoformat(),
         "finished_at": (started + timedelta(minutes=10)).isoformat(),
-        "score_events": [],
+        "score_events": [
+            {
+                "kind": "checkpoint",
+                "checkpoint": 1,
+                "points": 1,
+                "sim_time": 300.0,
+                "wall_time": (started + timedelta(minutes=5)).isoformat(),
+            }
+        ],
         "logs": [
             dict(declared, filename=name, sha256=hashlib.sha256(log).hexdigest())
             for name in ("a.bin", "b.bin")
+        ]
+        + [  # what a finished run is re-simulated from, declared (empty: stored at once)
+            {"filename": name, "kind": "proof", "size": 0, "sha256": hashlib.sha256().hexdigest()}
+            for name in PROOF_LOGS
         ],
     }
     db.session.commit()

@@ -113,6 +113,15 @@ def test_a_run_and_its_log_uploaded_as_documented(master: Flask) -> None:
                 "size": 0,
                 "sha256": hashlib.sha256(b"").hexdigest(),
             },
+            *(  # what a finished run is re-simulated from is declared too (empty here)
+                {
+                    "filename": name,
+                    "kind": kind,
+                    "size": 0,
+                    "sha256": hashlib.sha256(b"").hexdigest(),
+                }
+                for name, kind in (("meta.json", "meta"), ("state.msgpack", "state"))
+            ),
         ],
     }
     base = "/api/v1/portal/ingest/runs/7"

@@ -18,12 +18,14 @@
       tr.append(cell(s.rank, "rank"), cell(s.team), cell(s.runs, "runs"),
         cell(s.checkpoints, "checkpoints"), cell((100 * s.uplink_share_left).toFixed(1) + "%", "share"),
         cell(s.seconds_left.toFixed(0), "seconds"),
-        cell(s.invalidated ? s.invalidated + " run(s) invalidated" : "", "invalidated"));
+        cell(s.unverified ? s.unverified + " unverified" : "", "unverified"),
+        cell([s.invalidated ? s.invalidated + " run(s) invalidated" : "",
+          s.held ? s.held + " held for review" : ""].filter(Boolean).join(", "), "invalidated"));
       body.append(tr);
     }
     if (!standings.length) {
       const td = cell("No teams yet.");
-      td.colSpan = 7;
+      td.colSpan = 8;
       body.append(document.createElement("tr"));
       body.lastChild.append(td);
     }

@@ -1,7 +1,7 @@
 """constellations: room in `state` for `terminate_incomplete` (a machine a terminate left dirty)
 
-Revision ID: 0020
-Revises: 0014
+Revision ID: 0016
+Revises: 0015
 Create Date: 2026-11-27 22:00:00
 """
 
@@ -10,8 +10,8 @@ from __future__ import annotations
 import sqlalchemy as sa
 from alembic import op
 
-revision = "0020"
-down_revision = "0014"
+revision = "0016"
+down_revision = "0015"
 branch_labels = None
 depends_on = None
 
