@@ -22,7 +22,7 @@ from cloudsim.jobs.views import job_summary
 from cloudsim.launched_constellations import access, service, vpn
 from cloudsim.launched_constellations.capacity import describe, room
 from cloudsim.launched_constellations.forms import LaunchForm
-from cloudsim.models import Role
+from cloudsim.models import Constellation, Role
 from cloudsim.people.service import visible_teams
 from cloudsim.web.downloads import attachment
 from cloudsim.web.inputs import query_id, query_int
@@ -81,11 +81,24 @@ def show(ref: int) -> ResponseReturnValue:
         "constellations/show.html",
         constellation=constellation,
         job=service.latest_job(constellation),
+        heard=last_heard(constellation),
         confirm=ConfirmForm(),
         team_user=TEAM_USER,
         field_computers=access.field_computers(constellation),
         ssh_config=access.ssh_config(constellation),
     )
+
+
+def last_heard(constellation: Constellation) -> dict[str, str]:
+    """Return when CloudSim last heard from each machine: a live run's reader, or verification."""
+    from cloudsim.competition.live import machines_heard  # the live reader is the runs' feature
+
+    heard = machines_heard(current_app.config["CLOUDSIM"], constellation.id)
+    for machine in constellation.machines:
+        verified = (machine.verification or {}).get("at")
+        if verified and machine.name not in heard:
+            heard[machine.name] = f"{verified} (verification)"
+    return heard
 
 
 @bp.route("/constellations/<int:ref>/status")
@@ -94,16 +107,21 @@ def status(ref: int) -> ResponseReturnValue:
     """Return the constellation's and its latest job's state, for the page's live updates."""
     constellation = service.get_constellation(current_user, ref)
     job = service.latest_job(constellation)
+    heard = last_heard(constellation)
     show_job = job is not None and current_user.has_role(Role.OFFICER)
     return jsonify(
         state=constellation.state.value,
         error=constellation.error,
+        error_code=constellation.error_code,
+        step=job.stage if job is not None else None,
+        step_since=job.updated_at.isoformat() if job is not None else None,
         machines=[
             {
                 "name": m.name,
                 "state": m.state.value,
                 "private_ip": m.private_ip,
                 "public_ip": m.public_ip,
+                "heard": heard.get(m.name),
             }
             for m in constellation.machines
         ],
