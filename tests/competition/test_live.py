@@ -39,7 +39,7 @@ CHECKPOINT = (
 
 @pytest.fixture(scope="module")
 def host() -> Iterator[Host]:
-    """Boot one minimal local host that stands for a run's sim, router and fc1."""
+    """Boot one minimal local host that stands for a run's sim, router and field computer."""
     if os.geteuid() != 0:
         pytest.skip("local hosts need root")
     scratch = Path(tempfile.mkdtemp(prefix=f"{PREFIX}-"))
@@ -67,9 +67,9 @@ def _write_live(host: Host, run: Run, sim_time: float, rtf: float) -> None:
 
 
 def test_the_reader_caches_a_runs_figures_and_every_view_reads_the_cache(
-    app: Flask, team_a: Team, host: Host, encryption_key: str
+    app: Flask, team_a: Team, team_b: Team, host: Host, encryption_key: str
 ) -> None:
-    run = live_run(team_a.id, "a-live", host, roles=("sim", "router", "fc1"))
+    run = live_run(team_a.id, "a-live", host, roles=("sim", "router", "fc"))
     config = app.config["CLOUDSIM"]
     reader = LiveReader(ConnectionCache())
     client = app.test_client()
@@ -81,7 +81,7 @@ def test_the_reader_caches_a_runs_figures_and_every_view_reads_the_cache(
 
         _write_live(host, run, 7.25, 0.97)
         assert reader.refresh(config) == 1
-        await_heard(reader, config, run.id, {"sim", "router", "fc1"})
+        await_heard(reader, config, run.id, {"sim", "router", "fc"})
         status = client.get(f"/runs/{run.id}/status").json
         assert status["live"] is True and status["sim_seconds"] == 7.25
         assert status["rtf"] == 0.97 and status["score"] == 1
@@ -89,7 +89,7 @@ def test_the_reader_caches_a_runs_figures_and_every_view_reads_the_cache(
         # the stand-in router counts 1000 and 2000 payload bytes
         assert status["bits_used"] == {"uplink": 8000, "downlink": 16000}
         assert status["bits_left"]["uplink"] == 1_000_000 - 8000
-        assert set(status["heard"]) == {"sim", "router", "fc1"}
+        assert set(status["heard"]) == {"sim", "router", "fc"}
         assert "svg" in status["charts"]["score"]
 
         # the simulator moves on and logs a checkpoint: the next refresh shows both
@@ -100,15 +100,15 @@ def test_the_reader_caches_a_runs_figures_and_every_view_reads_the_cache(
         api = client.get(f"/api/v1/runs/{run.id}/live", headers=token_for(member)).json
         assert api["sim_seconds"] == 9.75 and api["score"] == 2
         assert [e["description"] for e in api["events"]] == ["gate", "gate_2"]
-        other = make_user(Role.USER)
+        other = make_user(Role.USER, team_b)
         hidden = client.get(f"/api/v1/runs/{run.id}/live", headers=token_for(other))
-        assert hidden.status_code in (403, 404)
+        assert hidden.status_code == 404  # another team's run: as if there were none
 
         # the bandwidth plots grow from the samples the reader keeps (one per answer)
         samples = live.read(live.connection(config), run.id)[1]
         assert len(samples) >= 2 and samples[-1][1:] == [8000, 16000]
         page = client.get(f"/runs/{run.id}").get_data(as_text=True)
-        assert "Uplink bits used" in page and "9.8" in page and 'data-role="fc1"' in page
+        assert "Uplink bits used" in page and "9.8" in page and 'data-role="fc"' in page
 
         # a simulator whose time stops moving is flagged, with its code
         stale = (utcnow() - timedelta(seconds=60)).isoformat()

@@ -65,9 +65,7 @@ def test_0012_ends_a_second_live_run_of_a_task_with_the_reason(
         # Core inserts of the columns 0011 has: the model may have gained columns since
         ids = {
             name: db.session.execute(
-                insert(Run)
-                .values(task_id=task_id, team_id=team.id, state=state)
-                .returning(Run.id)
+                insert(Run).values(task_id=task_id, team_id=team.id, state=state).returning(Run.id)
             ).scalar_one()
             for name, (task_id, state) in rows.items()
         }
