@@ -73,13 +73,18 @@ def connection(config: Config) -> redis.Redis:
     )
 
 
-def read(client: redis.Redis, run_id: int) -> tuple[dict[str, Any], list[list[float]]]:
-    """Return a run's live figures and its bandwidth samples ({} and [] when there are none)."""
+def read(client: redis.Redis, run_id: int) -> tuple[dict[str, Any], int]:
+    """Return a run's live figures and how many bandwidth samples it has ({} and 0: none)."""
     pipe = client.pipeline()
     pipe.get(KEY.format(run_id))
-    pipe.lrange(SAMPLES_KEY.format(run_id), 0, -1)
-    figures, samples = pipe.execute()
-    return (json.loads(figures) if figures else {}), [json.loads(s) for s in samples]
+    pipe.llen(SAMPLES_KEY.format(run_id))
+    figures, count = pipe.execute()
+    return (json.loads(figures) if figures else {}), int(count)
+
+
+def samples(client: redis.Redis, run_id: int) -> list[list[float]]:
+    """Return a run's bandwidth samples: [seconds since it started running, up, down] each."""
+    return [json.loads(s) for s in client.lrange(SAMPLES_KEY.format(run_id), 0, -1)]
 
 
 class LiveReader:
@@ -117,6 +122,7 @@ class LiveReader:
             del self._out[key]
         client = connection(config)
         live = {run.id: run for run in runs}
+        self._fc_asked = {k: v for k, v in self._fc_asked.items() if k in live}
         for (run_id, role), future in sorted(done.items()):
             if run_id not in live:
                 continue

@@ -6,30 +6,45 @@ The run page's updates, the API's `GET /runs/{id}/live`, the dashboard's run car
 
 from __future__ import annotations
 
+import threading
 from datetime import UTC, datetime
 from typing import Any
 
 import redis
 from csrouter.bandwidth_log import DIRECTIONS, Bandwidth
+from sqlalchemy import func, select
 
 from cloudsim.competition import live
 from cloudsim.competition.plots import bandwidth_charts, score_chart
 from cloudsim.config import Config
 from cloudsim.error_codes import RUN_SIM_SILENT, RUN_SIM_SLOW, describe
-from cloudsim.models import Run, RunState, utcnow
+from cloudsim.extensions import db
+from cloudsim.models import Job, Run, RunState, utcnow
 from cloudsim.web import format_datetime
 
 MAX_SECONDS = 24 * 3600  # a sample past this is not a run's: never grow a chart to it
+DRAWN_KEPT = 64  # live runs whose last charts a web process keeps
+_DRAWN: dict[int, tuple[tuple[Any, ...], dict[str, Any]]] = {}
+_DRAWN_LOCK = threading.Lock()
 
 
-def cached(config: Config, run: Run) -> tuple[dict[str, Any], list[list[float]]]:
-    """Return the run's cached live figures and bandwidth samples ({} and [] if unreadable)."""
+def cached(config: Config, run: Run) -> tuple[dict[str, Any], int]:
+    """Return the run's cached live figures and its count of bandwidth samples ({} and 0 if
+    unreadable)."""
     if run.state != RunState.RUNNING:
-        return {}, []
+        return {}, 0
     try:
         return live.read(live.connection(config), run.id)
     except redis.RedisError:  # the page still shows the row; its flags say nothing is live
-        return {}, []
+        return {}, 0
+
+
+def samples(config: Config, run: Run) -> list[list[float]]:
+    """Return the run's cached bandwidth samples ([] if unreadable)."""
+    try:
+        return live.samples(live.connection(config), run.id)
+    except redis.RedisError:
+        return []
 
 
 def live_status(config: Config, run: Run, figures: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -137,9 +152,25 @@ def per_second(samples: list[list[float]], caps: dict[str, int]) -> dict[str, Ba
     return found
 
 
-def charts_html(charts: dict[str, Any]) -> dict[str, Any]:
-    """Return the charts as markup strings (for JSON)."""
-    return {"score": str(charts["score"]), "bandwidth": [str(m) for m in charts["bandwidth"]]}
+def charts_html(config: Config, run: Run, figures: dict[str, Any], count: int) -> dict[str, Any]:
+    """Return the live charts as markup strings (for JSON), drawn once per change of the
+    figures in this process however many pages poll them."""
+    key = (
+        count,
+        len(figures.get("events") or []),
+        (figures.get("sim") or {}).get("sim_time"),
+    )
+    with _DRAWN_LOCK:
+        drawn = _DRAWN.get(run.id)
+    if drawn is not None and drawn[0] == key:
+        return drawn[1]
+    charts = live_charts(run, figures, samples(config, run))
+    html = {"score": str(charts["score"]), "bandwidth": [str(m) for m in charts["bandwidth"]]}
+    with _DRAWN_LOCK:
+        _DRAWN[run.id] = (key, html)
+        while len(_DRAWN) > DRAWN_KEPT:
+            _DRAWN.pop(next(iter(_DRAWN)))
+    return html
 
 
 def _event(event: Any) -> dict[str, Any]:
@@ -156,6 +187,12 @@ def _event(event: Any) -> dict[str, Any]:
 def _state_since(run: Run) -> datetime | None:
     if run.state == RunState.RUNNING:
         return run.running_at
+    if run.state == RunState.STOPPING:  # since its (first) stop job was started
+        return db.session.scalar(
+            select(func.min(Job.created_at)).where(
+                Job.kind == "run.stop", Job.target_type == "run", Job.target_id == run.id
+            )
+        )
     if run.state in (RunState.FINISHED, RunState.ERROR):
         return run.finished_at
     return run.review_since if run.state == RunState.NEEDS_REVIEW else run.started_at

@@ -159,9 +159,11 @@ def run(run_id: int) -> ResponseReturnValue:
 
 def _run_page(shown: Run, review: ReviewForm, status: int = 200) -> Any:
     config = current_app.config["CLOUDSIM"]
-    figures, samples = live_view.cached(config, shown)
+    figures, _ = live_view.cached(config, shown)
     now = live_view.live_status(config, shown, figures)
-    charts = live_view.live_charts(shown, figures, samples) if figures else None
+    charts = None
+    if figures:
+        charts = live_view.live_charts(shown, figures, live_view.samples(config, shown))
     return render_template(
         "competition/run.html",
         run=shown,
@@ -229,10 +231,10 @@ def run_status(run_id: int) -> ResponseReturnValue:
     """Return the run's state and live figures with its charts, for the page's live updates."""
     shown = run_service.get_run(current_user, run_id)
     config = current_app.config["CLOUDSIM"]
-    figures, samples = live_view.cached(config, shown)
+    figures, count = live_view.cached(config, shown)
     now = live_view.live_status(config, shown, figures)
     if figures:
-        now["charts"] = live_view.charts_html(live_view.live_charts(shown, figures, samples))
+        now["charts"] = live_view.charts_html(config, shown, figures, count)
     return jsonify(now)
 
 

@@ -105,7 +105,7 @@ def test_the_reader_caches_a_runs_figures_and_every_view_reads_the_cache(
         assert hidden.status_code == 404  # another team's run: as if there were none
 
         # the bandwidth plots grow from the samples the reader keeps (one per answer)
-        samples = live.read(live.connection(config), run.id)[1]
+        samples = live.samples(live.connection(config), run.id)
         assert len(samples) >= 2 and samples[-1][1:] == [8000, 16000]
         page = client.get(f"/runs/{run.id}").get_data(as_text=True)
         assert "Uplink bits used" in page and "9.8" in page and 'data-role="fc"' in page

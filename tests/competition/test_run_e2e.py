@@ -296,9 +296,8 @@ def _watch_run_page(page: Page, base: str, run: Run) -> None:
     expect(clock).not_to_have_text("0.0", timeout=60_000)  # the reader's first answers
     for _ in range(5):
         before = float(clock.inner_text())
-        page.wait_for_function(
-            f"Number(document.getElementById('run-time').textContent) > {before}",
-            timeout=2_000,
+        wait_in_page(
+            page, f"Number(document.getElementById('run-time').textContent) > {before}", 2_000
         )
     expect(page.locator("#run-heard li[data-role='sim'] time")).not_to_be_empty()
     expect(page.locator("#run-heard li[data-role='router'] time")).not_to_be_empty()
@@ -306,12 +305,8 @@ def _watch_run_page(page: Page, base: str, run: Run) -> None:
     plot = page.locator("svg[aria-label='Uplink bandwidth'] polyline").first
     expect(plot).to_be_visible(timeout=10_000)
     points = len((plot.get_attribute("points") or "").split())
-    page.wait_for_function(
-        "(n) => { const p = document.querySelector(\"svg[aria-label='Uplink bandwidth'] "
-        "polyline\"); return p && p.getAttribute('points').split(' ').length > n; }",
-        arg=points,
-        timeout=5_000,
-    )
+    uplink = "document.querySelector(\"svg[aria-label='Uplink bandwidth'] polyline\")"
+    wait_in_page(page, f"{uplink}.getAttribute('points').split(' ').length > {points}", 5_000)
     row = page.locator("#score-events tr", has_text="checkpoint").first
     expect(row).to_be_visible(timeout=90_000)
     logged = datetime.fromisoformat(row.locator("td").nth(3).inner_text()).timestamp()

@@ -36,7 +36,7 @@ def hosts_config(
         job_lease_seconds=5,
         # eight engineers' tests share two cores: a launch must not fail for the load alone
         # (production keeps CLOUDSIM_SIM_MIN_RTF at 1.0; tests/launched_constellations checks it)
-        **{"sim_min_rtf": 0.2, **settings},
+        **{"sim_min_rtf": 0.05, **settings},
     )
 
 
