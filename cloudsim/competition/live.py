@@ -14,6 +14,7 @@ import json
 import logging
 import os
 import shlex
+import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
@@ -87,6 +88,15 @@ def samples(client: redis.Redis, run_id: int) -> list[list[float]]:
     return [json.loads(s) for s in client.lrange(SAMPLES_KEY.format(run_id), 0, -1)]
 
 
+@dataclass(frozen=True)
+class LiveRun:
+    """What recording an answer needs of a run (pool threads do not touch the database)."""
+
+    id: int
+    since: float  # when it started running (UNIX time): bandwidth samples count from there
+    constellation_id: int | None
+
+
 class LiveReader:
     """One worker process's live reader: its threads, its questions still out."""
 
@@ -96,11 +106,17 @@ class LiveReader:
         self._pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="live")
         self._out: dict[tuple[int, str], Future[Answer]] = {}
         self._fc_asked: dict[int, float] = {}
+        self._locks: dict[int, threading.Lock] = {}  # one writer of a run's figures at a time
 
     def refresh(self, config: Config) -> int:
-        """Ask every running run's machines once and cache what came back; return the runs."""
+        """Ask every running run's machines once; each answer is cached the moment it comes
+        (not at the next refresh), so a slow answer is late by its own delay only."""
         runs = list(db.session.scalars(select(Run).where(Run.state == RunState.RUNNING)))
+        client = connection(config)
         now = time.time()
+        live = {run.id: run for run in runs}
+        self._fc_asked = {k: v for k, v in self._fc_asked.items() if k in live}
+        self._locks = {k: v for k, v in self._locks.items() if k in live}
         for run in runs:
             try:
                 found = run_targets(run, config)
@@ -110,30 +126,42 @@ class LiveReader:
             ask_fc = now - self._fc_asked.get(run.id, 0.0) >= FC_EVERY_S
             if ask_fc:
                 self._fc_asked[run.id] = now
+            about = LiveRun(
+                run.id, (run.running_at or run.started_at).timestamp(), run.constellation_id
+            )
+            lock = self._locks.setdefault(run.id, threading.Lock())
             for role, target in _roles(found, ask_fc):
                 if (run.id, role) not in self._out:
                     self._out[run.id, role] = self._pool.submit(
-                        self._ask, run.id, role, target, found
+                        self._answer, about, role, target, found, client, config, lock
                     )
-        if self._out:  # answers later than this are applied by the next refresh
+        if self._out:  # the beat's pace: a question still out is not asked again
             wait(self._out.values(), timeout=config.run_live_seconds * 0.8)
-        done = {key: f for key, f in self._out.items() if f.done()}
-        for key in done:
-            del self._out[key]
-        client = connection(config)
-        live = {run.id: run for run in runs}
-        self._fc_asked = {k: v for k, v in self._fc_asked.items() if k in live}
-        for (run_id, role), future in sorted(done.items()):
-            if run_id not in live:
-                continue
-            if future.exception() is not None:
-                log.warning("run %s: %s did not answer: %s", run_id, role, future.exception())
-                continue
-            record(client, live[run_id], future.result(), config)
+        for key, future in list(self._out.items()):
+            if future.done():
+                del self._out[key]
+                if future.exception() is not None:
+                    log.warning("run %s: %s did not answer: %s", *key, future.exception())
         return len(runs)
 
+    def _answer(
+        self,
+        run: LiveRun,
+        role: str,
+        target: SSHTarget,
+        found: RunTargets,
+        client: redis.Redis,
+        config: Config,
+        lock: threading.Lock,
+    ) -> Answer:
+        """Ask one machine and cache its answer (in a pool thread: SSH and Redis only)."""
+        answer = self._ask(run.id, role, target, found)
+        with lock:
+            record(client, run, answer, config)
+        return answer
+
     def _ask(self, run_id: int, role: str, target: SSHTarget, found: RunTargets) -> Answer:
-        """Ask one machine (in a pool thread: SSH only, no database)."""
+        """Ask one machine."""
         executor = SSHExecutor(
             found.host_keys,
             secrets=[found.private_key],
@@ -190,7 +218,7 @@ def ask_sim(executor: SSHExecutor, sim: SSHTarget, run_id: int) -> dict[str, Any
     return figures
 
 
-def record(client: redis.Redis, run: Run, answer: Answer, config: Config) -> None:
+def record(client: redis.Redis, run: LiveRun, answer: Answer, config: Config) -> None:
     """Merge one machine's answer into the run's cached figures."""
     key = KEY.format(run.id)
     raw = client.get(key)
@@ -211,9 +239,8 @@ def record(client: redis.Redis, run: Run, answer: Answer, config: Config) -> Non
     if answer.role == "router" and answer.figures is not None:
         cached["used"] = answer.figures["used"]
         cached["spent_at"] = answer.figures["spent_at"]
-        since = run.running_at or run.started_at
         used = answer.figures["used"]
-        sample = [round(answer.at - since.timestamp(), 2), used["uplink"], used["downlink"]]
+        sample = [round(answer.at - run.since, 2), used["uplink"], used["downlink"]]
         client.rpush(SAMPLES_KEY.format(run.id), json.dumps(sample))
         client.expire(SAMPLES_KEY.format(run.id), KEPT_SECONDS)
     client.set(key, json.dumps(cached), ex=KEPT_SECONDS)

@@ -69,6 +69,7 @@
     }
   }
   async function poll() {
+    const started = Date.now();  // one poll a second, however long an answer takes
     try {
       const response = await fetch(box.dataset.statusUrl, {credentials: "same-origin"});
       if (!response.ok) throw new Error(response.status);
@@ -94,7 +95,7 @@
       charts(data.charts);
       if (settled.includes(data.state)) { location.reload(); return; }
     } catch (e) { /* the server may be restarting: keep trying */ }
-    setTimeout(poll, 1000);
+    setTimeout(poll, Math.max(0, 1000 - (Date.now() - started)));
   }
   poll();
 })();

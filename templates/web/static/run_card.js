@@ -4,6 +4,7 @@
   function follow(card) {
     const put = (name, value) => { card.querySelector(`[data-live="${name}"]`).textContent = value; };
     async function poll() {
+      const started = Date.now();
       try {
         const response = await fetch(card.dataset.statusUrl, {credentials: "same-origin"});
         if (!response.ok) throw new Error(response.status);
@@ -19,7 +20,7 @@
         put("flags", data.flags.map((f) => f.code).join(" "));
         if (settled.includes(data.state)) return;
       } catch (e) { /* the server may be restarting: keep trying */ }
-      setTimeout(poll, 1000);
+      setTimeout(poll, Math.max(0, 1000 - (Date.now() - started)));
     }
     poll();
   }
