@@ -162,6 +162,27 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_RUN_SUPERVISE_SECONDS": Setting(
         "5", "How often live runs are checked for their end (time limit, falls, window, stop)"
     ),
+    "CLOUDSIM_RUN_LIVE_SECONDS": Setting(
+        "1",
+        "How often a running run's live figures (simulated time, RTF, score, bits) are read from"
+        " its machines into Redis, where its page, the API and `cloudsim run watch` read them",
+    ),
+    "CLOUDSIM_RUN_SILENT_SECONDS": Setting(
+        "5",
+        "A running run whose simulator has not answered, or whose simulated time has not moved,"
+        " for this long is flagged on its page (RUN-SIM-SILENT)",
+    ),
+    "CLOUDSIM_RUN_RTF_ALERT": Setting(
+        "0.9", "A running run whose real-time factor stays under this is flagged (RUN-SIM-SLOW)"
+    ),
+    "CLOUDSIM_RUN_RTF_ALERT_SECONDS": Setting(
+        "10", "How long the real-time factor must stay under CLOUDSIM_RUN_RTF_ALERT to be flagged"
+    ),
+    "CLOUDSIM_SIM_MIN_RTF": Setting(
+        "1.0",
+        "The real-time factor a simulator machine must hold in launch verification's self-test"
+        " (with every sensor on); a slower machine fails verification (LAUNCH-SIM-SLOW)",
+    ),
     "CLOUDSIM_RUN_GRACE_SECONDS": Setting(
         "120", "Wall seconds past a run's timeout after which CloudSim stops it regardless"
     ),
@@ -265,6 +286,11 @@ class Config:
     leaderboard_for_users: str
     run_supervise_seconds: int
     run_grace_seconds: int
+    run_live_seconds: int
+    run_silent_seconds: int
+    run_rtf_alert: float
+    run_rtf_alert_seconds: int
+    sim_min_rtf: float
     run_probe_seconds: int
     ssh_connections: int
     portal_url: str
@@ -318,6 +344,15 @@ class Config:
             value = number(name)
             if value < 1:
                 raise ConfigError(f"{name} must be at least 1, got {value}")
+            return value
+
+        def real(name: str) -> float:
+            try:
+                value = float(get(name))
+            except ValueError:
+                raise ConfigError(f"{name} must be a number, got {get(name)!r}") from None
+            if not 0 <= value < 100:
+                raise ConfigError(f"{name} must be between 0 and 100, got {value}")
             return value
 
         instance_dir = Path(str(overrides.pop("instance_dir", get("CLOUDSIM_INSTANCE_DIR"))))
@@ -398,6 +433,11 @@ class Config:
             ),
             run_supervise_seconds=number("CLOUDSIM_RUN_SUPERVISE_SECONDS"),
             run_grace_seconds=number("CLOUDSIM_RUN_GRACE_SECONDS"),
+            run_live_seconds=positive("CLOUDSIM_RUN_LIVE_SECONDS"),
+            run_silent_seconds=positive("CLOUDSIM_RUN_SILENT_SECONDS"),
+            run_rtf_alert=real("CLOUDSIM_RUN_RTF_ALERT"),
+            run_rtf_alert_seconds=number("CLOUDSIM_RUN_RTF_ALERT_SECONDS"),
+            sim_min_rtf=real("CLOUDSIM_SIM_MIN_RTF"),
             run_probe_seconds=positive("CLOUDSIM_RUN_PROBE_SECONDS"),
             ssh_connections=positive("CLOUDSIM_SSH_CONNECTIONS"),
             portal_url=_portal_url(get("CLOUDSIM_PORTAL_URL")),

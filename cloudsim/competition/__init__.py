@@ -14,13 +14,15 @@ if TYPE_CHECKING:
 def init_app(app: Flask) -> None:
     """Register this feature's pages, API and jobs with the app."""
     from cloudsim.api import register_api
-    from cloudsim.competition import api, demo, jobs, supervision, views  # noqa: F401 (tasks)
+    from cloudsim.competition import api, demo, jobs, live, supervision, views  # noqa: F401
     from cloudsim.jobs.queue import schedule_task
 
     app.register_blueprint(views.bp)
     register_api(app, api.blp)
     every = timedelta(seconds=app.config["CLOUDSIM"].run_supervise_seconds)
     schedule_task(app, "cloudsim.competition.supervise", every)
+    live_every = timedelta(seconds=app.config["CLOUDSIM"].run_live_seconds)
+    schedule_task(app, "cloudsim.competition.live", live_every)
 
 
 def init_cli(cli: LazyGroup) -> None:

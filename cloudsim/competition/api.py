@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from typing import Any
 
+from flask import current_app
 from flask.views import MethodView
 from marshmallow import Schema, fields, validate
 from sqlalchemy.orm import selectinload
 
 from cloudsim.api.common import Blueprint, SelectPage, caller
+from cloudsim.competition import live_view, schedule, season
 from cloudsim.competition import runs as run_service
-from cloudsim.competition import schedule, season
 from cloudsim.models import Run, RunState, UploadState
 from cloudsim.web.inputs import INT64_MAX, Id, Int
 
@@ -132,10 +133,15 @@ class RunSchema(Schema):
     task_id = fields.Int()
     team_id = fields.Int()
     constellation_id = fields.Int(allow_none=True)
-    state = fields.Str()
+    state = fields.Str(
+        metadata={"description": "starting, running, stopping, finished, error, needs_review"}
+    )
     stop_reason = fields.Str(allow_none=True)
     end_reason = fields.Str(allow_none=True)
     error = fields.Str(allow_none=True)
+    error_code = fields.Str(
+        allow_none=True, metadata={"description": "a stable code of docs/error-codes.md"}
+    )
     score = fields.Int()
     falls = fields.Int()
     sim_seconds = fields.Float()
@@ -185,6 +191,57 @@ class RunSchema(Schema):
 class RunDetailSchema(RunSchema):
     score_events = fields.List(fields.Nested(ScoreEventSchema))
     artifacts = fields.List(fields.Nested(ArtifactSchema))
+
+
+class LiveEventSchema(Schema):
+    kind = fields.Str(metadata={"description": "checkpoint, fall or run_end"})
+    sim_time = fields.Float()
+    wall_time = fields.Str(metadata={"description": "ISO 8601, UTC"})
+    checkpoint = fields.Int(allow_none=True)
+    points = fields.Int()
+    description = fields.Str()
+
+
+class FlagSchema(Schema):
+    code = fields.Str(metadata={"description": "a code of docs/error-codes.md"})
+    cause = fields.Str()
+    remedy = fields.Str()
+    figures = fields.Str(required=False)
+
+
+def _directions(description: str) -> fields.Dict:
+    return fields.Dict(
+        keys=fields.Str(), values=fields.Raw(allow_none=True), metadata={"description": description}
+    )
+
+
+class RunLiveSchema(Schema):
+    id = fields.Int()
+    state = fields.Str()
+    since = fields.Str(allow_none=True, metadata={"description": "when it entered its state"})
+    live = fields.Bool(
+        metadata={"description": "true: the figures are the live reader's, at most a few s old"}
+    )
+    score = fields.Int()
+    falls = fields.Int()
+    sim_seconds = fields.Float(metadata={"description": "simulated time, live from the simulator"})
+    timeout_s = fields.Int()
+    rtf = fields.Float(allow_none=True, metadata={"description": "real-time factor, last second"})
+    end_reason = fields.Str(allow_none=True)
+    error = fields.Str(allow_none=True)
+    error_code = fields.Str(allow_none=True, metadata={"description": "docs/error-codes.md"})
+    bits_used = _directions("payload bits used, uplink and downlink")
+    caps = _directions("the task's caps in bits, uplink and downlink")
+    bits_left = _directions("bits left under each cap")
+    spent_since = _directions("when each cap was spent (ISO 8601), null while it lasts")
+    caps_spent = fields.Str()
+    events = fields.List(fields.Nested(LiveEventSchema))
+    heard = _directions(
+        "when CloudSim last heard from each machine of the run (sim, router, field computers)"
+    )
+    flags = fields.List(
+        fields.Nested(FlagSchema), metadata={"description": "what is wrong now (running runs)"}
+    )
 
 
 class StandingSchema(Schema):
@@ -296,6 +353,15 @@ class RunById(MethodView):
     def get(self, run_id: int) -> Any:
         """Return a run with its score events and logs."""
         return run_service.get_run(caller(), run_id)
+
+
+@blp.route("/runs/<int:run_id>/live")
+class RunLive(MethodView):
+    @blp.response(200, RunLiveSchema)
+    def get(self, run_id: int) -> Any:
+        """Get a run's figures now: live (refreshed each second) while it runs, else final."""
+        run = run_service.get_run(caller(), run_id)
+        return live_view.live_status(current_app.config["CLOUDSIM"], run)
 
 
 @blp.route("/runs/<int:run_id>/stop")

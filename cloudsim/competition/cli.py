@@ -2,17 +2,23 @@
 
 from __future__ import annotations
 
+import json
+import time
+from typing import Any
+
 import click
 from drcsim.worlds import WORLD_NAMES
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import ID, app_context, emit, reports_errors
 from cloudsim.cli.files import LoadedText, TextFile
+from cloudsim.competition import live_view, schedule, season
 from cloudsim.competition import runs as run_service
-from cloudsim.competition import schedule, season
 from cloudsim.extensions import db
 from cloudsim.models import Run, Task
 from cloudsim.people.service import find_team
+
+LIVE_STATES = ("starting", "running", "stopping")
 
 
 def task_data(task: Task) -> dict[str, object]:
@@ -196,6 +202,39 @@ def show(run_id: int, as_json: bool) -> None:
             f"{shown.score} checkpoint(s), {shown.falls} fall(s), "
             f"ended by {shown.end_reason or '-'}",
         )
+
+
+@run.command("watch")
+@click.argument("run_id", type=ID)
+@click.option("--lines", type=click.IntRange(min=1), help="Stop after this many lines.")
+@click.option("--json", "as_json", is_flag=True, help="A JSON object a line (the API's body).")
+@reports_errors
+def watch(run_id: int, lines: int | None, as_json: bool) -> None:
+    """Print a live run's figures once a second until it ends."""
+    with app_context() as app:
+        printed = 0
+        while True:
+            db.session.expire_all()  # the reader and the jobs change the row meanwhile
+            now = live_view.live_status(app.config["CLOUDSIM"], run_service.get_run(SYSTEM, run_id))
+            click.echo(json.dumps(now) if as_json else watch_line(now))
+            printed += 1
+            if now["state"] not in LIVE_STATES or (lines is not None and printed >= lines):
+                break
+            time.sleep(1.0)  # the pace of the output, not a wait for something
+
+
+def watch_line(now: dict[str, Any]) -> str:
+    """Return one line of `cloudsim run watch`."""
+    rtf = "-" if now["rtf"] is None else f"{now['rtf']:.2f}"
+    flags = " ".join(f["code"] for f in now["flags"])
+    return (
+        f"run {now['id']} {now['state']}: t={now['sim_seconds']:.1f}/{now['timeout_s']} s "
+        f"rtf={rtf} score={now['score']} falls={now['falls']} "
+        f"left up={now['bits_left']['uplink']:,} down={now['bits_left']['downlink']:,} bits"
+        + (f" caps spent: {now['caps_spent']}" if now["caps_spent"] != "none" else "")
+        + (f" {flags}" if flags else "")
+        + (f" error {now['error_code'] or ''} {now['error']}" if now["error"] else "")
+    )
 
 
 @click.command()

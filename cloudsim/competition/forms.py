@@ -86,3 +86,17 @@ class ImportForm(FlaskForm):
         if upload is not None and getattr(upload, "filename", None):
             return str(upload.read().decode("utf-8", "replace"))
         return str(self.schedule_text.data or "")
+
+
+class ReviewForm(FlaskForm):
+    """An officer's decision on a run whose end could not be established."""
+
+    decision = SelectField(
+        "Decision",
+        choices=[
+            SelectChoice("accept", "Accept the end its logs show"),
+            SelectChoice("fail", "Mark the run failed"),
+        ],
+        validators=[DataRequired()],
+    )
+    note = TextAreaField("What was checked", validators=[DataRequired(), Length(max=2000)])

@@ -254,7 +254,7 @@ def _start_simulator(reach: Machines, run: Run) -> datetime:
 def stop_run_job(ctx: JobContext, job: RunJob) -> None:
     """Stop the simulator, disarm the router, collect and score the logs, finish the run."""
     run = ctx.load(Run, job.run_id)
-    if run.state in (RunState.FINISHED, RunState.ERROR):
+    if run.state in (RunState.FINISHED, RunState.ERROR, RunState.NEEDS_REVIEW):
         ctx.log(f"run {run.id} is {run.state.value} already")
         return
     lifecycle.stopping(run)
@@ -274,6 +274,11 @@ def stop_run_job(ctx: JobContext, job: RunJob) -> None:
     score_run(run, store)
     run = ctx.load(Run, job.run_id)
     error = "; ".join([*problems, *([router_note] if router_note else [])])[:4000] or None
+    if problems and run.running_at is not None and artifact_for(run, SCORE) is None:
+        # it ran, but without its score log nobody can say how it ended: officers settle it
+        lifecycle.needs_review(run, error or "the score log could not be collected")
+        ctx.log(f"run {run.id} needs review: {run.error}")
+        return
     lifecycle.ended(run, error, failed=bool(problems))
     ctx.log(f"run {run.id} {run.state.value}: {run.score} checkpoint(s), ended by {run.end_reason}")
 

@@ -1,6 +1,7 @@
 """A run's life: the one place its state changes and the jobs each change starts are enqueued.
 
-starting -> running -> stopping -> finished | error; a start that fails goes to stopping.
+starting -> running -> stopping -> finished | error; a start that fails goes to stopping; a
+stop that keeps failing goes to needs_review, which an officer settles (finished or error).
 The service checks who may ask and what is allowed; the job bodies and the beat do the work;
 all of them call here to move the state.
 """
@@ -13,6 +14,13 @@ from typing import Any
 from sqlalchemy import update
 
 from cloudsim.auth.policy import SYSTEM, Actor
+from cloudsim.error_codes import (
+    RUN_END_UNKNOWN,
+    RUN_REVIEWED_FAILED,
+    RUN_ROUTER_FAULT,
+    RUN_START_FAILED,
+    RUN_STOP_FAILED,
+)
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import Payload
 from cloudsim.jobs.service import enqueue
@@ -70,7 +78,7 @@ def request_stop(run: Run, reason: str) -> bool:
 
 def start_failed(run: Run, error: str) -> None:
     """Record why a run could not start and start stopping what was started."""
-    run.error = error
+    run.error, run.error_code = error, RUN_START_FAILED
     run.stop_reason = run.stop_reason or "error"
     run.state = RunState.STOPPING
     enqueue_stop(run)
@@ -95,8 +103,29 @@ def stopping(run: Run) -> None:
 
 def ended(run: Run, error: str | None, failed: bool) -> None:
     """Mark a stopped run finished (or error), freeing its constellation."""
+    if failed:
+        run.error_code = run.error_code or RUN_STOP_FAILED
+    elif run.error_code != RUN_ROUTER_FAULT:  # a recovered router fault stays a note
+        run.error_code = None
     run.error = error
     run.state = RunState.ERROR if failed else RunState.FINISHED
     run.end_reason = run.end_reason or run.stop_reason
+    run.finished_at = utcnow()
+    run.active_constellation_id = None
+
+
+def needs_review(run: Run, why: str) -> None:
+    """Hand a run whose end cannot be established to the officers, never leaving it live."""
+    run.state = RunState.NEEDS_REVIEW
+    run.error, run.error_code = why, RUN_END_UNKNOWN
+    run.review_since = utcnow()
+
+
+def settled(run: Run, accept: bool, end_reason: str) -> None:
+    """Record an officer's decision on a run in review: its end accepted, or failed."""
+    run.state = RunState.FINISHED if accept else RunState.ERROR
+    run.end_reason = end_reason if accept else run.end_reason
+    if not accept:
+        run.error_code = RUN_REVIEWED_FAILED
     run.finished_at = utcnow()
     run.active_constellation_id = None

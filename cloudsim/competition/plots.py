@@ -52,13 +52,19 @@ def line_chart(
     x_label: str,
     y_label: str,
     limit: tuple[str, float] | None = None,
+    limit_scaled: bool = True,
     width: int = 640,
     height: int = 220,
 ) -> Markup:
-    """Return an accessible SVG line chart; `limit` draws a labelled horizontal line (a cap)."""
+    """Return an accessible SVG line chart; `limit` draws a labelled horizontal line (a cap).
+
+    With `limit_scaled` false the scale follows the data alone: a limit above it is marked at
+    the top edge with its value, so small use is not flattened against a large cap.
+    """
     left, right, top, bottom = 64, 12, 28, 36
     xs = [x for s in series for x, _ in s.points] or [0.0]
-    ys = [y for s in series for _, y in s.points] + ([limit[1]] if limit else []) + [0.0]
+    scaled = [limit[1]] if limit and limit_scaled else []
+    ys = [y for s in series for _, y in s.points] + scaled + [0.0]
     x_max = max(max(xs), 1.0)
     y_max = max(ys) * 1.05 or 1.0
 
@@ -89,7 +95,16 @@ def line_chart(
         f'transform="rotate(-90 12 {(top + height - bottom) / 2:.0f})" text-anchor="middle">'
         f"{escape(y_label)}</text>",
     ]
-    if limit is not None:
+    if limit is not None and limit[1] > y_max:
+        label, value = limit
+        parts.append(
+            f'<line x1="{left}" y1="{top}" x2="{width - right}" y2="{top}" stroke="#cf222e" '
+            'stroke-dasharray="2 6" class="limit" data-off-scale="true"/>'
+            f'<text x="{width - right}" y="{top - 2}" text-anchor="end" font-size="10" '
+            f'fill="#cf222e">{escape(label)} {escape(short(value))} above the scale '
+            f"({escape(f'{100 * max(ys) / value:.1f}' if value else '0')}% used)</text>"
+        )
+    elif limit is not None:
         label, value = limit
         parts.append(
             f'<line x1="{left}" y1="{py(value):.1f}" x2="{width - right}" y2="{py(value):.1f}" '
@@ -101,7 +116,9 @@ def line_chart(
         colour = COLOURS[index % len(COLOURS)]
         points = _stepped(line.points) if line.step else line.points
         if points:
-            path = " ".join(f"{px(x):.1f},{py(y):.1f}" for x, y in points)
+            path = " ".join(
+                f"{x:.1f},{y:.1f}" for x, y in _per_pixel([(px(x), py(y)) for x, y in points])
+            )
             parts.append(
                 f'<polyline fill="none" stroke="{colour}" stroke-width="1.5" '
                 f'points="{path}" data-series="{escape(line.label)}"/>'
@@ -112,6 +129,28 @@ def line_chart(
         )
     parts.append("</svg>")
     return Markup("".join(parts))  # noqa: S704 - every text in it went through escape()
+
+
+def _per_pixel(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Keep, of the points falling in one pixel column, the highest and the lowest (in their
+    order): the line looks the same, and a 30-minute run's chart stays small."""
+    if len(points) <= 2:
+        return points
+    kept: list[tuple[float, float]] = []
+    column: list[tuple[float, float]] = []
+    for point in points:
+        if column and int(point[0]) != int(column[0][0]):
+            kept += _extremes(column)
+            column = []
+        column.append(point)
+    return kept + _extremes(column)
+
+
+def _extremes(column: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    if len(column) <= 2:
+        return column
+    top, bottom = min(column, key=lambda p: p[1]), max(column, key=lambda p: p[1])
+    return sorted({top, bottom}, key=column.index)
 
 
 def _stepped(points: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -159,6 +198,7 @@ def bandwidth_charts(bandwidth: dict[str, Bandwidth]) -> list[Markup]:
                 x_label="seconds since the run started",
                 y_label="bits",
                 limit=cap,
+                limit_scaled=False,
             )
         )
     return charts

@@ -81,9 +81,8 @@ def start_run(actor: Actor, task_id: int, constellation_id: int | None = None) -
 
 def task_run(task_id: int) -> int | None:
     """Return the id of the task's live or finished run, if it has one."""
-    return db.session.scalar(
-        select(Run.id).where(Run.task_id == task_id, Run.state.in_((*LIVE, RunState.FINISHED)))
-    )
+    held = (*LIVE, RunState.FINISHED, RunState.NEEDS_REVIEW)  # a run in review may yet count
+    return db.session.scalar(select(Run.id).where(Run.task_id == task_id, Run.state.in_(held)))
 
 
 def _refuse_if_run(task: Task) -> None:
@@ -126,6 +125,32 @@ def stop_run(actor: Actor, run_id: int) -> Run:
     if run.stop_reason is None:
         record("run.stop", actor, target_type="run", target_id=run.id, team_id=run.team_id)
     lifecycle.request_stop(run, "stopped")
+    return run
+
+
+def settle_review(actor: Actor, run_id: int, accept: bool, note: str) -> Run:
+    """Settle a run in review (officers): accept the end its logs show, or mark it failed."""
+    run = get_run(actor, run_id)
+    if actor is None or not actor.has_role(Role.OFFICER):
+        raise Forbidden("only officers settle a run in review")
+    if run.state != RunState.NEEDS_REVIEW:
+        raise Conflict(f"run {run.id} is {run.state.value}, not in review")
+    note = note.strip()
+    if not note:
+        raise Conflict("say why (what was checked) when settling a run")
+    end_reason = run.end_reason or run.stop_reason or "reviewed"
+    record(
+        "run.review",
+        actor,
+        target_type="run",
+        target_id=run.id,
+        team_id=run.team_id,
+        decision="accept" if accept else "fail",
+        note=note[:2000],
+    )
+    lifecycle.settled(run, accept, end_reason)
+    run.officer_note = note[:2000]
+    db.session.flush()
     return run
 
 

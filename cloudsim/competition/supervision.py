@@ -21,7 +21,7 @@ from datetime import datetime, timedelta
 
 from celery import shared_task
 from csrouter.protocol import payload_bits_used, spent_at
-from drcsim.rundir import FINAL, SCORE, read_score_log
+from drcsim.rundir import FINAL, LIVE, SCORE, read_live, read_score_log
 from flask import current_app
 from sqlalchemy import select
 
@@ -29,6 +29,7 @@ from cloudsim.competition import lifecycle
 from cloudsim.competition.artifacts import run_dir
 from cloudsim.competition.jobs import ROUTER_FAULT, RunTargets, run_targets, unit_name
 from cloudsim.config import Config
+from cloudsim.error_codes import RUN_ROUTER_FAULT
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import router_control
@@ -59,6 +60,7 @@ class SimAnswer:
 
     score_lines: list[str]
     ended: bool
+    sim_time: float = 0.0  # from its live figures: the score log's last event may be old
 
 
 @dataclass(frozen=True)
@@ -205,13 +207,17 @@ def ask_sim(executor: SSHExecutor, sim: SSHTarget, run_id: int) -> SimAnswer:
     folder = run_dir(run_id)
     unit = shlex.quote(unit_name(run_id))
     command = (
+        f"cat {shlex.quote(f'{folder}/{LIVE}')} 2>/dev/null; echo; echo '#'; "
         f"cat {shlex.quote(f'{folder}/{SCORE}')} 2>/dev/null; echo '#'; "
         f"test -f {shlex.quote(f'{folder}/{FINAL}')} && echo final; "
         f"systemctl is-active --quiet {unit} || echo inactive"
     )
     output = executor.run(sim, command).stdout
-    lines, _, status = output.rpartition("#\n")
-    return SimAnswer(lines.splitlines(), "final" in status or "inactive" in status)
+    live_text, _, rest = output.partition("#\n")
+    lines, _, status = rest.rpartition("#\n")
+    figures = read_live(live_text.strip()) or {}
+    ended = "final" in status or "inactive" in status
+    return SimAnswer(lines.splitlines(), ended, float(figures.get("sim_time", 0.0)))
 
 
 def ask_router(executor: SSHExecutor, router: SSHTarget) -> RouterAnswer:
@@ -244,7 +250,8 @@ def _apply(
     answer = future.result()
     if isinstance(answer, SimAnswer):
         result = read_score_log(answer.score_lines)
-        run.score, run.falls, run.sim_seconds = result.score, result.falls, result.sim_seconds
+        run.score, run.falls = result.score, result.falls
+        run.sim_seconds = max(result.sim_seconds, answer.sim_time)
         db.session.flush()
         return lifecycle.request_stop(run, "ended") if answer.ended else 0
     if answer.used is not None:
@@ -253,10 +260,10 @@ def _apply(
         run.uplink_spent_at = run.uplink_spent_at or answer.spent.get("uplink")
         run.downlink_spent_at = run.downlink_spent_at or answer.spent.get("downlink")
     if answer.faults:
-        run.error = ROUTER_FAULT + "; ".join(answer.faults)
+        run.error, run.error_code = ROUTER_FAULT + "; ".join(answer.faults), RUN_ROUTER_FAULT
         log.warning("run %s: %s", run.id, run.error)
     elif run.error and run.error.startswith(ROUTER_FAULT):
-        run.error = None
+        run.error, run.error_code = None, None
     db.session.flush()
     return 0
 
@@ -281,6 +288,10 @@ def _retry_failed_stops() -> int:
             log.warning("run %s: stop job failed (%s); starting it again", run.id, jobs[0].error)
             lifecycle.enqueue_stop(run)
             retried += 1
+        elif jobs and jobs[0].state == JobState.FAILED:
+            why = f"its stop failed {len(jobs)} times, last: {jobs[0].error}"
+            log.warning("run %s: %s; it needs an officer's review", run.id, why)
+            lifecycle.needs_review(run, why[:4000])
     return retried
 
 

@@ -23,16 +23,15 @@ from sqlalchemy.orm import selectinload
 
 from cloudsim.auth.forms import ConfirmForm
 from cloudsim.auth.policy import role_required
+from cloudsim.competition import live_view, schedule, season
 from cloudsim.competition import runs as run_service
-from cloudsim.competition import schedule, season
 from cloudsim.competition.artifacts import LogStore
-from cloudsim.competition.forms import ImportForm, ScheduleForm
+from cloudsim.competition.forms import ImportForm, ReviewForm, ScheduleForm
 from cloudsim.competition.plots import bandwidth_charts, score_chart
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.models import Role, Run, Task, User
 from cloudsim.people.service import visible_teams
-from cloudsim.web import format_datetime
 from cloudsim.web.downloads import attachment
 from cloudsim.web.inputs import query_int
 
@@ -155,16 +154,47 @@ def runs() -> ResponseReturnValue:
 @bp.route("/runs/<int:run_id>")
 @login_required
 def run(run_id: int) -> ResponseReturnValue:
-    shown = run_service.get_run(current_user, run_id)
+    return _run_page(run_service.get_run(current_user, run_id), ReviewForm())
+
+
+def _run_page(shown: Run, review: ReviewForm, status: int = 200) -> Any:
+    config = current_app.config["CLOUDSIM"]
+    figures, _ = live_view.cached(config, shown)
+    now = live_view.live_status(config, shown, figures)
+    charts = None
+    if figures:
+        charts = live_view.live_charts(shown, figures, live_view.samples(config, shown))
     return render_template(
         "competition/run.html",
         run=shown,
-        score_plot=_score_plot(shown),
-        bandwidth_plots=bandwidth_plots_of(shown),
-        bits_left=_bits_left(shown),
-        caps_spent=_caps_spent(shown),
+        now=now,
+        score_plot=charts["score"] if charts else _score_plot(shown),
+        bandwidth_plots=bandwidth_plots_of(shown) or (charts["bandwidth"] if charts else []),
+        bits_left=now["bits_left"],
+        caps_spent=now["caps_spent"],
         confirm=ConfirmForm(),
-    )
+        review=review,
+    ), status
+
+
+@bp.route("/runs/<int:run_id>/settle", methods=["POST"])
+@role_required(Role.OFFICER)
+def settle(run_id: int) -> ResponseReturnValue:
+    shown = run_service.get_run(current_user, run_id)
+    form = ReviewForm()
+    if not form.validate_on_submit():
+        return _run_page(shown, form, 400)
+    try:
+        run_service.settle_review(
+            current_user, run_id, form.decision.data == "accept", form.note.data or ""
+        )
+    except CloudSimError as exc:
+        db.session.rollback()
+        form.form_errors.append(str(exc))
+        return _run_page(run_service.get_run(current_user, run_id), form, exc.status)
+    db.session.commit()
+    flash(f"Run {run_id} settled.", "info")
+    return redirect(url_for("competition.run", run_id=run_id))
 
 
 def _score_plot(run: Run) -> Any:
@@ -195,44 +225,17 @@ def _score_after(run: Run, sim_time: float) -> int:
     return sum(e.points for e in run.score_events if e.sim_time <= sim_time)
 
 
-def _bits_left(run: Run) -> dict[str, int]:
-    return {
-        "uplink": max(0, run.task.uplink_bits - run.uplink_bits_used),
-        "downlink": max(0, run.task.downlink_bits - run.downlink_bits_used),
-    }
-
-
-def _caps_spent(run: Run) -> str:
-    """Say which caps are spent and since when (the page and its live updates show this text)."""
-    spent = [
-        f"{direction} spent since {format_datetime(at, True)} UTC (traffic that way is dropped)"
-        for direction, at in (("uplink", run.uplink_spent_at), ("downlink", run.downlink_spent_at))
-        if at is not None
-    ]
-    return "; ".join(spent) or "none"
-
-
 @bp.route("/runs/<int:run_id>/status")
 @login_required
 def run_status(run_id: int) -> ResponseReturnValue:
-    """Return the run's state and score, for the page's live updates."""
+    """Return the run's state and live figures with its charts, for the page's live updates."""
     shown = run_service.get_run(current_user, run_id)
-    return jsonify(
-        id=shown.id,
-        state=shown.state.value,
-        score=shown.score,
-        falls=shown.falls,
-        sim_seconds=round(shown.sim_seconds, 2),
-        end_reason=shown.end_reason,
-        error=shown.error,
-        bits_left=_bits_left(shown),
-        # a spent direction is dropped from then on: say so, not only "bits left"
-        caps_spent=_caps_spent(shown),
-        spent_since={
-            "uplink": shown.uplink_spent_at.isoformat() if shown.uplink_spent_at else None,
-            "downlink": shown.downlink_spent_at.isoformat() if shown.downlink_spent_at else None,
-        },
-    )
+    config = current_app.config["CLOUDSIM"]
+    figures, count = live_view.cached(config, shown)
+    now = live_view.live_status(config, shown, figures)
+    if figures:
+        now["charts"] = live_view.charts_html(config, shown, figures, count)
+    return jsonify(now)
 
 
 @bp.route("/runs/<int:run_id>/stop", methods=["POST"])

@@ -12,11 +12,13 @@ from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
 from flask import current_app
+from libcloud.common.types import LibcloudError
 from libcloud.compute.base import Node, NodeAuthSSHKey
 from libcloud.compute.types import NodeState
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
+from cloudsim.error_codes import LAUNCH_FAILED, LAUNCH_PROVIDER, LAUNCH_UNREACHABLE
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, job_kind
@@ -36,7 +38,7 @@ from cloudsim.launched_constellations.keys import (
 from cloudsim.launched_constellations.lifecycle import ConstellationJob
 from cloudsim.launched_constellations.service import launched_kind
 from cloudsim.launched_constellations.software import Supply, preinstall, supply_needs
-from cloudsim.launched_constellations.verify import verify_constellation
+from cloudsim.launched_constellations.verify import VerificationFailed, verify_constellation
 from cloudsim.models import Constellation, ConstellationState, Secret
 from cloudsim.models.machines import GONE
 from cloudsim.providers.service import Provider, open_provider
@@ -53,6 +55,7 @@ from constellations.plans import (
 from constellations.plans.base import MemberAccount
 from constellations.plans.members import member_accounts
 from provisioners.providers.base import WAITING, CloudSimNodeDriver
+from provisioners.providers.errors import ProviderError
 from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor, SSHTarget
 
 T = TypeVar("T")
@@ -77,7 +80,9 @@ def launch_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     except Exception as exc:
         db.session.rollback()
         constellation = ctx.load(Constellation, job.constellation_id)
-        lifecycle.failed(constellation, ctx.masked(f"{ctx.job.stage}: {exc}"))
+        lifecycle.failed(
+            constellation, ctx.masked(f"{ctx.job.stage}: {exc}"), launch_error_code(exc)
+        )
         ctx.checkpoint()  # the error state survives the runner's rollback
         raise
     lifecycle.ready(constellation)
@@ -87,6 +92,17 @@ def launch_constellation(ctx: JobContext, job: ConstellationJob) -> None:
         # changed while launching, when no push runs: the field computers have the old ones
         ctx.log("the team's members, keys or sudo changed during the launch: pushing them again")
         lifecycle.start_refresh_access(SYSTEM, constellation)
+
+
+def launch_error_code(exc: BaseException) -> str:
+    """Return the stable code of why a launch failed (cloudsim.error_codes)."""
+    if isinstance(exc, VerificationFailed):
+        return exc.code
+    if isinstance(exc, SSHError):
+        return LAUNCH_UNREACHABLE
+    if isinstance(exc, LibcloudError | ProviderError):
+        return LAUNCH_PROVIDER
+    return LAUNCH_FAILED
 
 
 def _team_access(constellation: Constellation) -> tuple[tuple[MemberAccount, ...], bool]:
@@ -144,6 +160,7 @@ def _launch(
             driver.ex_public_proxy_command,
             driver.ex_public_command,
             config.verify_retry_seconds,
+            config.sim_min_rtf,
         )
 
 

@@ -61,12 +61,13 @@ def start_refresh_access(actor: Actor, constellation: Constellation) -> Job:
 def launching(constellation: Constellation) -> None:
     """Mark a constellation as being launched, clearing any earlier error."""
     constellation.state, constellation.error = ConstellationState.LAUNCHING, None
+    constellation.error_code = None
 
 
-def failed(constellation: Constellation, error: str) -> None:
-    """Mark a constellation's launch as failed, with why."""
+def failed(constellation: Constellation, error: str, code: str | None = None) -> None:
+    """Mark a constellation's launch as failed, with why (and its code, cloudsim.error_codes)."""
     constellation.state = ConstellationState.ERROR
-    constellation.error = error
+    constellation.error, constellation.error_code = error, code
 
 
 def ready(constellation: Constellation) -> None:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import re
+from datetime import UTC, datetime, time, timedelta
+
 from flask import (
     Blueprint,
     current_app,
@@ -22,13 +25,15 @@ from cloudsim.jobs.views import job_summary
 from cloudsim.launched_constellations import access, service, vpn
 from cloudsim.launched_constellations.capacity import describe, room
 from cloudsim.launched_constellations.forms import LaunchForm
-from cloudsim.models import Role
+from cloudsim.models import Constellation, Job, Role
 from cloudsim.people.service import visible_teams
 from cloudsim.web.downloads import attachment
 from cloudsim.web.inputs import query_id, query_int
 from constellations.plans.base import member_account_name
 
 bp = Blueprint("constellations", __name__)
+# how a job log marks a stage: "HH:MM:SS == stage" (JobContext.stage)
+STAGE_LINE = re.compile(r"^(\d\d:\d\d:\d\d) == ", re.MULTILINE)
 
 
 @bp.route("/constellations")
@@ -77,10 +82,13 @@ def launch() -> ResponseReturnValue:
 @login_required
 def show(ref: int) -> ResponseReturnValue:
     constellation = service.get_constellation(current_user, ref)
+    job = service.latest_job(constellation)
     return render_template(
         "constellations/show.html",
         constellation=constellation,
-        job=service.latest_job(constellation),
+        job=job,
+        heard=last_heard(constellation),
+        step_since=step_since(job),
         confirm=ConfirmForm(),
         account=access.account_name(current_user, constellation),
         placeholder=access.ACCOUNT_PLACEHOLDER,
@@ -90,22 +98,52 @@ def show(ref: int) -> ResponseReturnValue:
     )
 
 
+def step_since(job: Job | None) -> str | None:
+    """Return when the job entered its current stage (its log's last "HH:MM:SS == stage")."""
+    if job is None:
+        return None
+    entered = STAGE_LINE.findall(job.log or "")
+    if not entered:
+        return job.updated_at.isoformat()
+    at = datetime.combine(job.updated_at.date(), time.fromisoformat(entered[-1]), UTC)
+    if at > job.updated_at + timedelta(seconds=1):  # the stage began before midnight
+        at -= timedelta(days=1)
+    return at.isoformat()
+
+
+def last_heard(constellation: Constellation) -> dict[str, str]:
+    """Return when CloudSim last heard from each machine: a live run's reader, or verification."""
+    from cloudsim.competition.live import machines_heard  # the live reader is the runs' feature
+
+    heard = machines_heard(current_app.config["CLOUDSIM"], constellation.id)
+    for machine in constellation.machines:
+        verified = (machine.verification or {}).get("at")
+        if verified and machine.name not in heard:
+            heard[machine.name] = f"{verified} (verification)"
+    return heard
+
+
 @bp.route("/constellations/<int:ref>/status")
 @login_required
 def status(ref: int) -> ResponseReturnValue:
     """Return the constellation's and its latest job's state, for the page's live updates."""
     constellation = service.get_constellation(current_user, ref)
     job = service.latest_job(constellation)
+    heard = last_heard(constellation)
     show_job = job is not None and current_user.has_role(Role.OFFICER)
     return jsonify(
         state=constellation.state.value,
         error=constellation.error,
+        error_code=constellation.error_code,
+        step=job.stage if job is not None else None,
+        step_since=step_since(job),
         machines=[
             {
                 "name": m.name,
                 "state": m.state.value,
                 "private_ip": m.private_ip,
                 "public_ip": m.public_ip,
+                "heard": heard.get(m.name),
             }
             for m in constellation.machines
         ],

@@ -60,6 +60,8 @@ class RunState(enum.StrEnum):
     STOPPING = "stopping"
     FINISHED = "finished"
     ERROR = "error"
+    # its end could not be established (its stop kept failing): an officer settles it
+    NEEDS_REVIEW = "needs_review"
 
 
 class Verification(enum.StrEnum):
@@ -115,6 +117,8 @@ class Run(Base):
     stop_reason: Mapped[str | None] = mapped_column(String(32))
     end_reason: Mapped[str | None] = mapped_column(String(32))
     error: Mapped[str | None] = mapped_column(Text)
+    error_code: Mapped[str | None] = mapped_column(String(32))  # cloudsim.error_codes
+    review_since: Mapped[datetime | None] = mapped_column(UTCDateTime)  # went to needs_review
     score: Mapped[int] = mapped_column(default=0)
     falls: Mapped[int] = mapped_column(default=0)
     sim_seconds: Mapped[float] = mapped_column(default=0.0)

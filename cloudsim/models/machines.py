@@ -81,6 +81,7 @@ class Constellation(Base):
         str_enum(ConstellationState, length=24), default=ConstellationState.PENDING
     )
     error: Mapped[str | None] = mapped_column(Text)
+    error_code: Mapped[str | None] = mapped_column(String(32))  # cloudsim.error_codes
     # Provider-side identifiers (network id, security groups, ...) needed to clean up.
     resources: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     # May the team's account on the field computers use sudo? Officers decide; off by default.

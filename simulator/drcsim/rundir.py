@@ -8,6 +8,7 @@ pybullet nor ZeroMQ.
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -21,6 +22,10 @@ SCORE = "score.jsonl"
 FINAL = "final.json"
 # The world document the run was built from, when the orchestrator handed one over.
 WORLD = "world.json"
+# The served run's live figures (simulated time, RTF, score), rewritten about twice a second
+# while it runs; not a log (it is not collected): a supervisor reads it to follow the run live.
+LIVE = "live.json"
+LIVE_EVERY_S = 0.5
 # Every file a finished run leaves in its directory; FINAL is missing if the simulator died.
 FILES = (SCORE, STATE, COMMANDS, META, FINAL)
 # The score log's events worth keeping (run_start says nothing).
@@ -95,6 +100,22 @@ def read_final(directory: Path) -> dict[str, Any]:
     """Return a run's final record."""
     data: dict[str, Any] = json.loads((directory / FINAL).read_text())
     return data
+
+
+def write_live(directory: Path, figures: dict[str, Any]) -> None:
+    """Replace the run's live figures at once (a reader never sees half a file)."""
+    partial = directory / f".{LIVE}.tmp"
+    partial.write_text(json.dumps(figures, sort_keys=True))
+    os.replace(partial, directory / LIVE)
+
+
+def read_live(text: str) -> dict[str, Any] | None:
+    """Return the live figures from LIVE's text; None when there are none (yet) or unreadable."""
+    try:
+        data = json.loads(text)
+    except ValueError:
+        return None
+    return data if isinstance(data, dict) and "sim_time" in data else None
 
 
 def read_score_log(lines: Iterable[str]) -> RunScore:

@@ -7,6 +7,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import zmq
@@ -16,6 +17,7 @@ from drcsim.engine import Simulation
 from drcsim.errors import ProtocolError
 from drcsim.models.humanoid import ALL_JOINTS
 from drcsim.protocol import BEHAVIOURS, MAX_MESSAGE_BYTES, decode_command, encode
+from drcsim.rundir import LIVE_EVERY_S, write_live
 from drcsim.scene import TIMESTEP
 from drcsim.sensors import SENSOR_TOPICS
 
@@ -131,6 +133,7 @@ class SimServer:
         sim.options.publish = self.publish
         self._rtf_mark = (time.monotonic(), sim.step_count)
         self.rtf = 0.0
+        self._live_at = 0.0
 
     # -- publishing ---------------------------------------------------------------------------
     def publish(self, topic: str, message: dict[str, Any]) -> None:
@@ -149,6 +152,26 @@ class SimServer:
         if wall >= 1.0:
             self.rtf = (step - self._rtf_mark[1]) * TIMESTEP / wall
             self._rtf_mark = (now, step)
+        if now - self._live_at >= LIVE_EVERY_S:
+            self.write_live()
+
+    def write_live(self) -> None:
+        """Publish the run's live figures in its log folder (a supervisor reads them over SSH)."""
+        self._live_at = time.monotonic()
+        if self.sim.options.log_dir is None:
+            return
+        figures = {
+            "sim_time": round(self.sim.sim_time, 3),
+            "rtf": round(self.rtf, 3),
+            "score": self.sim.scorer.reached,
+            "falls": self.sim.scorer.falls,
+            "ended": self.sim.ended,
+            "wall_time": round(time.time(), 3),
+        }
+        try:
+            write_live(Path(self.sim.options.log_dir), figures)
+        except OSError as exc:  # the run goes on; only its live view goes stale
+            log.warning("cannot write the live figures: %s", exc)
 
     # -- sockets ------------------------------------------------------------------------------
     def _handle_zap(self) -> None:
@@ -250,6 +273,8 @@ class SimServer:
         while self.running and not should_stop():
             now = time.monotonic()
             if self.sim.ended:
+                if ended_at is None:
+                    self.write_live()
                 ended_at = ended_at or now
                 if now - ended_at >= self.settings.linger_s:
                     break

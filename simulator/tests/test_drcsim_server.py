@@ -15,6 +15,7 @@ import pytest
 from drcsim.client import SimClient
 from drcsim.errors import ClientError
 from drcsim.protocol import MAX_MESSAGE_BYTES
+from drcsim.rundir import LIVE, read_live
 
 ServerFactory = Callable[..., tuple[Any, int]]
 
@@ -131,9 +132,24 @@ def test_a_real_time_run_stopped_by_sigterm_is_logged_and_replays(
         client.behaviour("walk", pose=[2.0, 0.5, 0.0])
         middle = client.wait_for("clock", lambda m: m["t"] >= 0.3)
         client.joints(position={"l_arm_shx": -0.4})
-        client.wait_for("clock", lambda m: m["t"] >= middle["t"] + 0.5)
+        later = client.wait_for("clock", lambda m: m["t"] >= middle["t"] + 0.5)
+        # the live figures a supervisor reads over SSH follow the simulated time
+        live = _live_once(tmp_path / "run-0", lambda f: f["sim_time"] >= later["t"])
+        assert live["ended"] is False and live["score"] == 0 and live["rtf"] > 0
     process.terminate()
     assert process.wait(timeout=30) == 0
     final = json.loads((tmp_path / "run-0" / "final.json").read_text())
     assert final["end_reason"] == "closed" and final["step"] >= 800
     assert replay(tmp_path / "run-0").final_digest == final["state_sha256"]
+
+
+def _live_once(folder: Path, wanted: Callable[[dict[str, Any]], bool]) -> dict[str, Any]:
+    """Return the run's live figures once they are as wanted (rewritten twice a second)."""
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        path = folder / LIVE
+        figures = read_live(path.read_text()) if path.exists() else None
+        if figures is not None and wanted(figures):
+            return figures
+        time.sleep(0.1)  # polling a file the simulator rewrites: nothing to await
+    raise AssertionError(f"{folder / LIVE} never showed the wanted figures")

@@ -8,8 +8,10 @@ import hashlib
 import json
 import shlex
 import threading
+import time
 from collections.abc import Callable, Iterator
-from datetime import timedelta
+from contextlib import ExitStack, contextmanager
+from datetime import datetime, timedelta
 from pathlib import Path
 
 import pytest
@@ -17,7 +19,7 @@ from celery.contrib.testing.worker import start_worker
 from csrouter.bandwidth_log import read_bandwidth_log
 from drcsim.worlds import document_digest
 from flask import Flask
-from playwright.sync_api import Browser, expect
+from playwright.sync_api import Browser, Page, expect
 from werkzeug.serving import make_server
 
 from cloudsim.auth.policy import SYSTEM
@@ -29,6 +31,7 @@ from cloudsim.competition.artifacts import (
     run_dir,
 )
 from cloudsim.competition.jobs import ROUTER_FAULT, machines
+from cloudsim.competition.live import refresh_live_runs
 from cloudsim.competition.schedule import in_zone
 from cloudsim.competition.supervision import supervise_runs
 from cloudsim.config import Config
@@ -133,16 +136,24 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     _refusals(constellations_app, team_a, user_a, user_b, run)
 
     db.session.refresh(run)
-    with machines(run, constellations_config) as reach:
-        controller = (
-            "systemd-run --unit=example-controller --collect /opt/drcsim/bin/drcsim "
-            f"example-controller --server {shlex.quote(reach.sim_ip)} --world vrc_task_2 "
-            "--timeout 120"
-        )
-        reach.executor.run(reach.by_name[team_machine], controller, timeout=30)
-        router_crashed = reach.router is not None
-        if router_crashed:  # the router's daemon crashes; systemd restarts it mid-run
-            reach.executor.run(reach.router, "systemctl kill --signal=KILL csrouter", timeout=30)
+    with ExitStack() as reading:
+        watching = None
+        if kind == "vrc":  # the reader runs before the robot moves, as the beat would
+            reading.enter_context(live_reader(constellations_app))
+            watching = _open_live_page(browser, live_url, user_a, run)
+        with machines(run, constellations_config) as reach:
+            controller = (
+                "systemd-run --unit=example-controller --collect /opt/drcsim/bin/drcsim "
+                f"example-controller --server {shlex.quote(reach.sim_ip)} --world vrc_task_2 "
+                "--timeout 120"
+            )
+            reach.executor.run(reach.by_name[team_machine], controller, timeout=30)
+            router_crashed = reach.router is not None
+            if router_crashed:  # the router's daemon crashes; systemd restarts it mid-run
+                kill = "systemctl kill --signal=KILL csrouter"
+                reach.executor.run(reach.router, kill, timeout=30)
+        if watching is not None:
+            _watch_run_page(watching, live_url, run)
 
     def beat(done: Callable[[Run], bool]) -> Callable[[], bool]:
         def check() -> bool:
@@ -228,6 +239,83 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     expect(page.get_by_role("link", name="score.jsonl")).to_be_visible()
     page.goto(f"{live_url}/leaderboard")
     expect(page.locator("tr[data-team='Team A'] .checkpoints")).to_have_text(str(run.score))
+
+
+@contextmanager
+def live_reader(app: Flask) -> Iterator[None]:
+    """Run the live reader once a second in a thread, as the beat does in production."""
+    stop = threading.Event()
+
+    def loop() -> None:
+        with app.app_context():
+            while not stop.is_set():
+                started = time.monotonic()
+                refresh_live_runs()
+                db.session.remove()
+                stop.wait(max(0.0, 1.0 - (time.monotonic() - started)))  # the beat's period
+
+    thread = threading.Thread(target=loop, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(timeout=60)
+
+
+# Records, in the page, when the first checkpoint row appeared (the browser's clock is the
+# machine's: local hosts share it with the simulator that wrote the event's wall time).
+SEEN_CHECKPOINT = """() => {
+  window.checkpointSeenAt = null;
+  const body = document.getElementById("score-events");
+  const look = () => {
+    if (window.checkpointSeenAt === null && [...body.rows].some(
+        (r) => r.cells[1] && r.cells[1].textContent === "checkpoint")) {
+      window.checkpointSeenAt = Date.now() / 1000;
+    }
+  };
+  new MutationObserver(look).observe(body, {childList: true, subtree: true});
+  look();
+}"""
+
+
+def _open_live_page(browser: Browser, base: str, user: User, run: Run) -> Page:
+    """Open the run's page as its team's member before the robot moves."""
+    page = browser.new_context().new_page()
+    log_in_page(page, base, user)
+    page.goto(f"{base}/runs/{run.id}")
+    page.evaluate(SEEN_CHECKPOINT)
+    return page
+
+
+def _watch_run_page(page: Page, base: str, run: Run) -> None:
+    """A member sees the run live: time advancing every 2 s, the checkpoint within 2 s of the
+    simulator logging it, the bandwidth plot growing, when each machine was last heard."""
+    clock = page.locator("#run-time")
+    expect(clock).not_to_have_text("0.0", timeout=60_000)  # the reader's first answers
+    for _ in range(5):
+        before = float(clock.inner_text())
+        wait_in_page(
+            page, f"Number(document.getElementById('run-time').textContent) > {before}", 2_000
+        )
+    expect(page.locator("#run-heard li[data-role='sim'] time")).not_to_be_empty()
+    expect(page.locator("#run-heard li[data-role='router'] time")).not_to_be_empty()
+    expect(page.locator("#run-heard li[data-role='fc1'] time")).not_to_be_empty()
+    plot = page.locator("svg[aria-label='Uplink bandwidth'] polyline").first
+    expect(plot).to_be_attached(timeout=10_000)  # a flat line at 0 has no height: "hidden"
+    points = len((plot.get_attribute("points") or "").split())
+    uplink = "document.querySelector(\"svg[aria-label='Uplink bandwidth'] polyline\")"
+    wait_in_page(page, f"{uplink}.getAttribute('points').split(' ').length > {points}", 5_000)
+    row = page.locator("#score-events tr", has_text="checkpoint").first
+    expect(row).to_be_visible(timeout=90_000)
+    logged = datetime.fromisoformat(row.locator("td").nth(3).inner_text()).timestamp()
+    seen = page.evaluate("window.checkpointSeenAt")
+    assert seen is not None and seen - logged <= 2.0, (logged, seen)
+    constellation = page.context.new_page()
+    constellation.goto(f"{base}/constellations/{run.constellation_id}")
+    for name in ("sim", "router", "fc1"):
+        expect(constellation.locator(f"tr[data-machine='{name}'] .heard")).not_to_have_text("—")
+    page.context.close()
 
 
 def _watch_live(browser: Browser, base: str, officer: User, user_a: User, run: Run) -> None:

@@ -48,5 +48,15 @@ def test_the_run_page_follows_a_live_run_without_a_reload(
         f"uplink spent since {spent:%Y-%m-%d %H:%M:%S} UTC (traffic that way is dropped)"
     )
     expect(caps).to_have_class("error")
+
+    # the dashboard's run card follows the same figures
+    page.goto(f"{live_url}/")
+    card = page.locator(f"#run-card-{run.id}")
+    expect(card.locator('[data-live="sim_seconds"]')).to_have_text("12.5")
+    run.sim_seconds, run.score = 14.0, 3
+    db.session.commit()
+    expect(card.locator('[data-live="sim_seconds"]')).to_have_text("14.0")
+    expect(card.locator('[data-live="score"]')).to_have_text("3")
+    expect(card.locator('[data-live="uplink_left"]')).to_have_text("0")
     assert problems == []
     page.context.close()

@@ -5,8 +5,9 @@ from __future__ import annotations
 import json
 
 import pytest
-from csrouter.bandwidth_log import read_bandwidth_log
+from csrouter.bandwidth_log import Bandwidth, read_bandwidth_log
 
+from cloudsim.competition.live_view import per_second
 from cloudsim.competition.plots import (
     bandwidth_charts,
     cumulative,
@@ -124,3 +125,25 @@ def test_bandwidth_lines_go_to_the_second_they_cover_even_when_written_late() ->
     usage = read_bandwidth_log(lines)
     assert usage["uplink"].bits_per_second == [800, 1600, 2400]
     assert usage["uplink"].used_bits == 4800
+
+
+def test_the_bits_used_chart_is_scaled_to_the_use_with_the_cap_marked() -> None:
+    usage = {
+        "uplink": Bandwidth(bits_per_second=[1000] * 10, used_bits=10_000, cap_bits=8_000_000),
+        "downlink": Bandwidth(bits_per_second=[1000] * 10, used_bits=10_000, cap_bits=10_500),
+    }
+    up_used, down_used = bandwidth_charts(usage)[1], bandwidth_charts(usage)[3]
+    # far below the cap: the scale is the use's (10k, not 8M), the cap marked above it
+    assert ">10.5k</text>" in up_used and 'data-off-scale="true"' in up_used
+    assert "cap 8M above the scale (0.1% used)" in up_used
+    # near the cap: the cap is the line inside the chart
+    assert 'class="limit"' in down_used and "data-off-scale" not in down_used
+
+
+def test_live_samples_become_bits_per_second() -> None:
+    samples = [[0.4, 0, 0], [1.2, 800, 80], [2.1, 800, 160], [3.0, 2400, 160]]
+    found = per_second(samples, {"uplink": 5000, "downlink": 100})
+    assert found["uplink"].bits_per_second == [0, 800, 1600]
+    assert found["downlink"].bits_per_second == [0, 80, 80]
+    assert found["uplink"].used_bits == 2400 and found["downlink"].cap_bits == 100
+    assert per_second([], {"uplink": 1, "downlink": 1})["uplink"].bits_per_second == []

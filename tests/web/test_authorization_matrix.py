@@ -116,6 +116,7 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("competition.run", "GET"): (LOGIN, 200, 404, 200, 200),
     ("competition.run_status", "GET"): (LOGIN, 200, 404, 200, 200),
     ("competition.stop", "POST"): (LOGIN, 409, 404, 409, 409),  # it has finished
+    ("competition.settle", "POST"): (LOGIN, 403, 403, 400, 400),  # the form is empty
     ("competition.download", "GET"): (LOGIN, 200, 404, 200, 200),
     # the portal (team A's page; its finished run has no bandwidth log: 404 for all)
     ("portal.index", "GET"): (LOGIN, 200, 200, 200, 200),
@@ -143,6 +144,7 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_competition.TaskById", "GET"): (401, 200, 404, 200, 200),
     ("api_competition.TaskById", "DELETE"): (401, 403, 403, 204, 204),
     ("api_competition.StartRun", "POST"): (401, 202, 403, 202, 202),
+    ("api_competition.RunLive", "GET"): (401, 200, 404, 200, 200),
     ("api_competition.Season", "GET"): (401, 403, 403, 200, 200),
     ("api_competition.Season", "POST"): (401, 403, 403, 201, 201),
     ("api_competition.Runs", "GET"): (401, 200, 200, 200, 200),

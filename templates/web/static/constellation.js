@@ -13,14 +13,19 @@
       const state = document.getElementById("c-state");
       state.textContent = data.state;
       state.className = "state " + data.state;
-      document.getElementById("c-error").textContent = data.error || "";
+      document.getElementById("c-error").textContent =
+        (data.error_code ? data.error_code + " " : "") + (data.error || "");
       document.getElementById("c-error").parentElement.hidden = !data.error;  // no empty row
+      document.getElementById("c-step").textContent = data.step || "—";
+      const since = document.getElementById("c-step-since");
+      if (since) since.textContent = data.step_since || "";
       for (const m of data.machines) {
         const row = document.querySelector(`tr[data-machine="${m.name}"]`);
         if (!row) continue;
         row.querySelector(".private").textContent = m.private_ip || "";
         row.querySelector(".public").textContent = m.public_ip || "";
         row.querySelector(".state-cell").innerHTML = `<span class="state ${m.state}">${m.state}</span>`;
+        row.querySelector(".heard").textContent = m.heard || "—";
       }
       if (data.job) {
         const stage = document.getElementById("job-stage");
@@ -31,7 +36,8 @@
         }
       }
       if (settled.includes(data.state) && (!data.job || ["succeeded", "failed"].includes(data.job.state))) {
-        if (box.dataset.wasBusy === "true") location.reload();  // show the verification results
+        if (box.dataset.wasBusy === "true") { location.reload(); return; }  // show the results
+        setTimeout(poll, 2000);  // settled: only the machines' last-heard times still move
         return;
       }
       box.dataset.wasBusy = "true";
