@@ -64,6 +64,12 @@ def login() -> ResponseReturnValue:
             return redirect(_safe_next(request.args.get("next")))
         record("auth.login_failed", None, target_type="user", target_id=None, email=email)
         db.session.commit()  # kept although the answer is a refusal, which commits nothing
+        if user is not None and password_ok:
+            # Only someone who knows the password learns that the account exists but is off.
+            flash(
+                "Your account is disabled: ask an officer of the competition to enable it.", "error"
+            )
+            return render_template("auth/login.html", form=form), 403
         flash("Wrong e-mail or password.", "error")
         return render_template("auth/login.html", form=form), 401
     status = 400 if request.method == "POST" else 200

@@ -49,6 +49,29 @@ def test_login_needs_csrf_and_the_right_password(
     assert "auth.login_failed" in actions and "auth.login" in actions
 
 
+def test_a_disabled_account_is_told_so_only_with_the_right_password(
+    app: Flask, people: dict[str, User | None]
+) -> None:
+    user = people["user_a"]
+    assert user is not None
+    user.active = False
+    db.session.commit()
+    client = app.test_client()
+    token = csrf_token(client.get("/login").get_data(as_text=True))
+    wrong = client.post(
+        "/login", data={"email": user.email, "password": "nope-nope-nope", "csrf_token": token}
+    )
+    assert wrong.status_code == 401
+    assert "Wrong e-mail or password" in wrong.get_data(as_text=True)
+    assert "disabled" not in wrong.get_data(as_text=True)
+    right = client.post(
+        "/login", data={"email": user.email, "password": PASSWORD, "csrf_token": token}
+    )
+    assert right.status_code == 403
+    assert "Your account is disabled" in right.get_data(as_text=True)
+    assert client.get("/account").status_code == 302  # and no session was started
+
+
 def test_login_redirects_only_to_local_pages(app: Flask, people: dict[str, User | None]) -> None:
     app.config["WTF_CSRF_ENABLED"] = False
     user = people["user_a"]
@@ -94,7 +117,7 @@ def test_disabled_user_and_changed_password_end_sessions(
     update_user(SYSTEM, user.id, active=False)
     assert client2.get("/account").status_code == 302
     denied = client2.post("/login", data={"email": user.email, "password": "another long password"})
-    assert denied.status_code == 401
+    assert denied.status_code == 403  # told the account is disabled: the password was right
 
 
 def test_api_tokens_are_shown_once_stored_hashed_and_revocable(
