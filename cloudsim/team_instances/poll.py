@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from datetime import timedelta
 from typing import Any
 
 from celery import shared_task
@@ -37,6 +38,9 @@ from constellations.plans.roles import CLOUDSIM_PORT
 
 PARALLEL = 8
 CALL_TIMEOUT = 10.0
+CATCH_UP_TASK = "cloudsim.team_instances.catch_up"
+CATCH_UP_EVERY = timedelta(seconds=1)
+CATCH_UP_HEALTH_TIMEOUT = 1.0  # a lagging instance that does not answer this fast: next second
 
 
 def endpoint_of(instance: TeamInstance, config: Config) -> Endpoint:
@@ -74,11 +78,16 @@ class Visit:
     launch: dict[str, Any] | str | None = None
 
 
-def _visit(endpoint: Endpoint, desired: dict[str, Any], launch: dict[str, Any] | None) -> Visit:
+def _visit(
+    endpoint: Endpoint,
+    desired: dict[str, Any],
+    launch: dict[str, Any] | None,
+    health_timeout: float = CALL_TIMEOUT,
+) -> Visit:
     """Check an instance's health, push its desired state (the reconcile), then follow the
     constellation launched through it."""
     try:
-        health = call(endpoint, "GET", "/instance/health", timeout=CALL_TIMEOUT)
+        health = call(endpoint, "GET", "/instance/health", timeout=health_timeout)
     except InstanceError as exc:
         return Visit(str(exc))
     if not isinstance(health, dict):
@@ -96,6 +105,7 @@ def check_instances(
     config: Config,
     ids: list[int] | None = None,
     connect: Callable[[TeamInstance, Config], Endpoint] = endpoint_of,
+    health_timeout: float = CALL_TIMEOUT,
 ) -> list[TeamInstance]:
     """Bring every live instance's state up to date with its constellation and its health,
     and push its desired state. `connect` says how to reach one (bench/ uses stand-ins)."""
@@ -127,7 +137,13 @@ def check_instances(
         with ThreadPoolExecutor(max_workers=PARALLEL) as pool:
             by_id = {i.id: i for i in instances}
             launches = [launch_of(by_id[i]) for i in endpoints]
-            visits = pool.map(_visit, endpoints.values(), [desired[i] for i in endpoints], launches)
+            visits = pool.map(
+                _visit,
+                endpoints.values(),
+                [desired[i] for i in endpoints],
+                launches,
+                [health_timeout] * len(endpoints),
+            )
             answers = dict(zip(endpoints, visits, strict=True))
     finally:
         for lock in locks:
@@ -148,6 +164,29 @@ def check_instances(
             sync_failed(instance, visit.sync)
     db.session.flush()
     return instances
+
+
+def lagging_instances() -> list[int]:
+    """Return the instances behind their master: unreachable, or whose last sync failed."""
+    behind = (TeamInstance.state == InstanceState.UNREACHABLE) | (
+        (TeamInstance.state == InstanceState.READY) & TeamInstance.sync_error.is_not(None)
+    )
+    return list(db.session.scalars(select(TeamInstance.id).where(behind)))
+
+
+def catch_up(config: Config) -> list[TeamInstance]:
+    """Check the lagging instances now: one that answers again gets its desired state at
+    once, not at the next poll (beat, every second; a query when none lags)."""
+    ids = lagging_instances()
+    if not ids:
+        return []
+    return check_instances(config, ids, health_timeout=CATCH_UP_HEALTH_TIMEOUT)
+
+
+@shared_task(name=CATCH_UP_TASK)
+def catch_up_task() -> int:
+    """Catch up the lagging team instances that answer again (beat)."""
+    return len(catch_up(current_app.config["CLOUDSIM"]))
 
 
 @shared_task(name="cloudsim.team_instances.poll")

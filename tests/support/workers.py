@@ -14,8 +14,11 @@ from cloudsim.models import Job
 from tests.support.servers import wait_for
 
 
-def worker_process(config: Config, root: Path) -> subprocess.Popen[bytes]:
-    """Start a prefork worker (one pool process) on the config's database and Redis.
+def worker_process(
+    config: Config, root: Path, beat_schedule: Path | None = None
+) -> subprocess.Popen[bytes]:
+    """Start a prefork worker (one pool process) on the config's database and Redis; with
+    `beat_schedule`, the beat too, inside it (every periodic task, as `cloudsim up` sends).
 
     root is the project's folder (pytest's rootpath), where `tests.support` is imported from.
     """
@@ -50,6 +53,8 @@ def worker_process(config: Config, root: Path) -> subprocess.Popen[bytes]:
         "--without-mingle",
         "--without-gossip",
     ]
+    if beat_schedule is not None:
+        argv += ["--beat", "--schedule", str(beat_schedule)]
     return subprocess.Popen(
         argv, env=env, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
     )
