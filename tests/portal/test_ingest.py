@@ -194,7 +194,11 @@ def test_the_outbox_catches_up_within_10_s_of_the_master_answering_again(
         # the worker and its beat are up once the beat's first heartbeat was taken
         beats = redis.Redis.from_url(config.effective_redis_url)
         wait_for(lambda: beats.exists(HEARTBEAT_KEY), 60, "the instance's worker and beat")
-        portal.server.start()  # the master answers again
+        portal.server.start()
+        endpoint = portal_endpoint()
+        assert endpoint is not None
+        # the clock starts when the master answers (its port opens before its app is loaded)
+        wait_for(lambda: outbox.master_answers(endpoint), 60, "the master answering again")
 
         def uploaded() -> bool:
             db.session.rollback()
