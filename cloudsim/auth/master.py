@@ -143,7 +143,9 @@ def awaiting_master() -> bool:
     if config is None or not config.admin_token:
         return False
     try:
-        started, synced = _redis(config).mget(STARTED_KEY, SYNCED_KEY)
+        started, synced = (
+            None if v is None else str(v) for v in _redis(config).mget(STARTED_KEY, SYNCED_KEY)
+        )
     except redis.RedisError:
         return True  # cannot tell: the safe side
     if started is None or started in _current_since:

@@ -33,7 +33,7 @@ class Seen:
         self._redis = redis.Redis.from_url(
             config.effective_redis_url, decode_responses=True, socket_timeout=5
         )
-        self.before: dict[str, str] = dict(self._redis.hgetall(SEEN_KEY))
+        self.before = {str(k): str(v) for k, v in self._redis.hgetall(SEEN_KEY).items()}
         self.now: dict[str, str] = {}
 
     def same(self, key: str, spec: Any) -> bool:
@@ -50,6 +50,6 @@ class Seen:
         """Remember what the master said this time (for the next sync)."""
         with self._redis.pipeline() as pipe:
             pipe.delete(SEEN_KEY)
-            if self.now:
-                pipe.hset(SEEN_KEY, mapping=self.now)
+            for key, digest in self.now.items():
+                pipe.hset(SEEN_KEY, key, digest)
             pipe.execute()
