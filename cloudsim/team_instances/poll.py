@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from datetime import timedelta
 from typing import Any
 
+import redis
 from celery import shared_task
 from flask import current_app
 from sqlalchemy import select
@@ -40,6 +41,7 @@ PARALLEL = 8
 CALL_TIMEOUT = 10.0
 CATCH_UP_TASK = "cloudsim.team_instances.catch_up"
 CATCH_UP_EVERY = timedelta(seconds=1)
+REFUSING_RECHECK = timedelta(seconds=10)
 CATCH_UP_HEALTH_TIMEOUT = 1.0  # a lagging instance that does not answer this fast: next second
 
 
@@ -174,13 +176,23 @@ def lagging_instances() -> list[int]:
     return list(db.session.scalars(select(TeamInstance.id).where(behind)))
 
 
+def _resting(instance_id: int) -> str:
+    return f"cloudsim:team-instance:{instance_id}:catch-up-rest"
+
+
 def catch_up(config: Config) -> list[TeamInstance]:
     """Check the lagging instances now: one that answers again gets its desired state at
-    once, not at the next poll (beat, every second; a query when none lags)."""
-    ids = lagging_instances()
+    once, not at the next poll (beat, every second; a query when none lags). One that answers
+    but refuses its sync rests REFUSING_RECHECK between tries, so it is not hammered."""
+    client = redis.Redis.from_url(config.effective_redis_url, socket_timeout=5)
+    ids = [i for i in lagging_instances() if not client.exists(_resting(i))]
     if not ids:
         return []
-    return check_instances(config, ids, health_timeout=CATCH_UP_HEALTH_TIMEOUT)
+    checked = check_instances(config, ids, health_timeout=CATCH_UP_HEALTH_TIMEOUT)
+    for instance in checked:
+        if instance.state == InstanceState.READY and instance.sync_error:
+            client.set(_resting(instance.id), "1", ex=REFUSING_RECHECK)
+    return checked
 
 
 @shared_task(name=CATCH_UP_TASK)
