@@ -3,7 +3,10 @@ per instance against lightweight stand-ins.
 
 1. (root; skipped with --stand-ins-only) Two real team instances on local hosts, deployed by
    the master; a user created on the master: seconds until both instances have it (pushed by
-   the sync jobs), and seconds of one reconcile (health + desired state) of both.
+   the sync jobs), and seconds of one reconcile (health + desired state) of both. Then the
+   catch-up: one instance cut off (its pin broken), a user disabled on the master meanwhile;
+   seconds from the instance answering again to the user disabled there, with the catch-up
+   sent once a second as the beat does (against the convergence above, the reference).
 2. The master's side of one poll (`check_instances`: desired state from the database, health
    and sync over pinned HTTPS, results written back) against 1, 10 and 30 stand-ins: loopback
    HTTPS servers in another process, each with its own certificate from the master's CA,
@@ -30,6 +33,7 @@ from pathlib import Path
 
 from celery.contrib.testing.worker import start_worker
 from flask import Flask
+from sqlalchemy import select
 
 from bench.provision import wait
 from cloudsim.app import create_app
@@ -44,13 +48,14 @@ from cloudsim.models import (
     Role,
     Task,
     TeamInstance,
+    User,
     utcnow,
 )
-from cloudsim.people.service import create_team, create_user
+from cloudsim.people.service import create_team, create_user, update_user
 from cloudsim.providers.service import open_provider
 from cloudsim.team_instances import service
 from cloudsim.team_instances.client import Endpoint, call
-from cloudsim.team_instances.poll import check_instances, endpoint_of
+from cloudsim.team_instances.poll import CATCH_UP_EVERY, catch_up, check_instances, endpoint_of
 from provisioners.remote import pki
 from tests.support.servers import RedisServer, bench_redis
 
@@ -215,8 +220,49 @@ def _has_user(app: Flask, instance_id: int, email: str) -> bool:
         return email in {u["email"] for u in call(endpoint, "GET", "/users?page_size=500")}
 
 
-def real_instances(folder: Path, redis: RedisServer) -> tuple[float, float, float]:
-    """Return (deploy s, change -> both converged s, one reconcile of both s)."""
+def _active(app: Flask, instance_id: int, email: str) -> bool:
+    with app.app_context():
+        instance = db.session.get(TeamInstance, instance_id)
+        assert instance is not None
+        endpoint = endpoint_of(instance, app.config["CLOUDSIM"])
+        users = call(endpoint, "GET", "/users?page_size=500")
+        return bool(next(u for u in users if u["email"] == email)["active"])
+
+
+def _catch_up_seconds(app: Flask, instance_id: int, email: str) -> float:
+    """Cut the instance off (pin broken), disable a user on the master, let the instance
+    answer again; return the seconds until the user is disabled there (beat ticks each 1 s)."""
+    config = app.config["CLOUDSIM"]
+    instance = db.session.get(TeamInstance, instance_id)
+    assert instance is not None
+    pinned, instance.cert_fingerprint = instance.cert_fingerprint, "00" * 32
+    db.session.commit()
+    user = db.session.scalar(select(User).where(User.email == email))
+    assert user is not None
+    update_user(SYSTEM, user.id, active=False)
+    db.session.commit()  # its sync job fails: the instance cannot be reached
+    while True:
+        db.session.expire_all()
+        if db.session.get(TeamInstance, instance_id).sync_error:  # type: ignore[union-attr]
+            break
+        time.sleep(0.1)
+    instance = db.session.get(TeamInstance, instance_id)
+    assert instance is not None
+    instance.cert_fingerprint = pinned
+    db.session.commit()
+    started, last_tick = time.perf_counter(), 0.0
+    while _active(app, instance_id, email):
+        if time.perf_counter() - last_tick >= CATCH_UP_EVERY.total_seconds():
+            last_tick = time.perf_counter()
+            db.session.expire_all()
+            catch_up(config)
+            db.session.commit()
+        time.sleep(0.05)
+    return time.perf_counter() - started
+
+
+def real_instances(folder: Path, redis: RedisServer) -> tuple[float, float, float, float]:
+    """Return (deploy s, change -> both converged s, one reconcile of both s, catch-up s)."""
     app = create_app(_config(folder / "real", redis, "csbfr", 0))
     try:
         with app.app_context():
@@ -263,10 +309,11 @@ def real_instances(folder: Path, redis: RedisServer) -> tuple[float, float, floa
                 check_instances(app.config["CLOUDSIM"], ids)
                 db.session.commit()
                 reconcile = time.perf_counter() - started
+                caught_up = _catch_up_seconds(app, ids[0], emails[0])
     finally:
         with app.app_context():
             open_provider("local", app.config["CLOUDSIM"]).driver.ex_sweep()  # type: ignore[attr-defined]
-    return deploy, converged, reconcile
+    return deploy, converged, reconcile, caught_up
 
 
 def main() -> None:
@@ -283,10 +330,16 @@ def main() -> None:
         shutil.rmtree(folder, ignore_errors=True)
     print("team instances benchmark")
     if real is not None:
-        deploy, converged, reconcile = real
+        deploy, converged, reconcile, caught_up = real
         print(f"  2 real instances (local hosts) deployed and ready   {deploy:7.1f} s")
         print(f"  a user made on the master -> on both instances      {converged:7.2f} s")
         print(f"  one reconcile of both (health + desired state)      {reconcile:7.2f} s")
+        print(
+            f"  catch-up: instance answers again -> a user disabled "
+            f"meanwhile is disabled there {caught_up:5.2f} s "
+            f"(ratio to a change reaching a reachable instance: {caught_up / converged:4.2f}; "
+            f"promised: within 2 s)"
+        )
     print(
         f"  master's side of one poll against stand-ins ({USERS_PER_TEAM} users, "
         f"{TASKS_PER_TEAM} tasks per team; {sizes[0][3] / 1024:.1f} KiB of desired state each)"

@@ -17,6 +17,7 @@ from cloudsim.api import (
 )
 from cloudsim.api.common import Blueprint, caller, columns
 from cloudsim.auth import ssh_keys
+from cloudsim.auth.master import refuse_until_current
 from cloudsim.auth.schemas import (
     GeneratedSshKeySchema,
     IssuedTokenSchema,
@@ -42,6 +43,7 @@ def init_bearer_auth(app: Flask) -> None:
         user = user_for_token(bearer_token())
         if user is None:
             return unauthenticated("authentication required: send 'Authorization: Bearer <token>'")
+        refuse_until_current(user)  # a restarted team instance: the master's accounts first
         g.api_user = user
         return None
 

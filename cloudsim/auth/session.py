@@ -17,6 +17,7 @@ from flask_login import login_user, logout_user
 from sqlalchemy import delete, select
 from sqlalchemy.orm import joinedload
 
+from cloudsim.auth.master import awaiting_master, is_master_account
 from cloudsim.extensions import db, login_manager
 from cloudsim.models import LoginSession, User, utcnow
 
@@ -78,6 +79,8 @@ def init_login(app: Flask) -> None:
             return None
         if row.created_at + _lifetime() < utcnow():
             return None  # the server ends it even if the browser kept the cookie
+        if not is_master_account(row.user) and awaiting_master():
+            return None  # a restarted team instance: its accounts may be stale (auth.master)
         return row.user
 
     @login_manager.unauthorized_handler

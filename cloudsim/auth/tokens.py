@@ -11,10 +11,10 @@ from sqlalchemy import select
 from sqlalchemy.orm import joinedload
 
 from cloudsim.audit.service import record
-from cloudsim.auth.policy import SYSTEM
-from cloudsim.errors import InvalidInput, NotFound
+from cloudsim.auth.master import is_master_token
+from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.models import ApiToken, Role, User, utcnow
+from cloudsim.models import ApiToken, User, utcnow
 
 TOKEN_PREFIX = "cst_"  # noqa: S105 (a marker, not a secret)
 MAX_ACTIVE_TOKENS = 20
@@ -56,29 +56,15 @@ def issue_token(user: User, name: str) -> IssuedToken:
     return IssuedToken(token, plaintext)
 
 
-def ensure_admin_token(email: str, plaintext: str) -> bool:
-    """Give the admin with this e-mail a token with this plaintext unless one exists; True if made.
-
-    How a master gets its own credential on a team instance it installs: it makes the token,
-    keeps it encrypted, and hands it over in the instance's settings (see team instances).
-    """
-    if db.session.scalar(select(ApiToken.id).where(ApiToken.token_hash == _digest(plaintext))):
-        return False
-    user = db.session.scalar(select(User).where(User.email == email))
-    if user is None or user.role != Role.ADMIN:
-        raise InvalidInput(f"no admin {email} to give CLOUDSIM_ADMIN_TOKEN to")
-    token = ApiToken(user=user, name="master", prefix=plaintext[:10], token_hash=_digest(plaintext))
-    db.session.add(token)
-    db.session.flush()
-    record("token.create", SYSTEM, target_type="token", target_id=token.id, name="master")
-    return True
-
-
 def revoke_token(user: User, token_id: int) -> None:
     """Revoke one of the user's own tokens."""
     token = db.session.get(ApiToken, token_id)
     if token is None or token.user_id != user.id:
         raise NotFound.of("token", token_id)
+    if is_master_token(token):
+        raise Conflict(
+            "this is the token this instance's master calls it with: it cannot be revoked here"
+        )
     if token.revoked_at is None:
         token.revoked_at = utcnow()
         record("token.revoke", user, target_type="token", target_id=token.id, team_id=user.team_id)

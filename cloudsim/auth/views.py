@@ -12,6 +12,7 @@ from sqlalchemy import select
 from cloudsim.audit.service import record
 from cloudsim.auth import ssh_keys
 from cloudsim.auth.forms import ConfirmForm, LoginForm, PasswordForm, SshKeyForm, TokenForm
+from cloudsim.auth.master import WAITING_MESSAGE, awaiting_master, is_master_account
 from cloudsim.auth.passwords import verify_password
 from cloudsim.auth.service import change_own_password
 from cloudsim.auth.session import end_session, start_session
@@ -58,6 +59,9 @@ def login() -> ResponseReturnValue:
         # Verify even for an unknown e-mail, so that timing does not reveal which accounts exist.
         password_ok = verify_password(user.password_hash if user else None, form.password.data)
         if user is not None and user.active and password_ok:
+            if not is_master_account(user) and awaiting_master():
+                flash(WAITING_MESSAGE, "error")  # a restarted team instance (auth.master)
+                return render_template("auth/login.html", form=form), 503
             start_session(user)
             user.last_login_at = utcnow()
             record("auth.login", user, target_type="user", target_id=user.id, team_id=user.team_id)

@@ -11,8 +11,8 @@ import click
 from sqlalchemy import select
 
 from cloudsim import migrate
+from cloudsim.auth.master import note_started, restore_master_access
 from cloudsim.auth.policy import SYSTEM
-from cloudsim.auth.tokens import ensure_admin_token
 from cloudsim.cli import app_context, reports_errors
 from cloudsim.competition.demo import schedule_demo
 from cloudsim.config import Config
@@ -170,8 +170,10 @@ def up(demo: bool) -> None:
             credentials = [f"created the first admin: {admin.user.email}"]
             if admin.generated_password:
                 credentials.append(f"  password (shown once): {admin.generated_password}")
-        if config.admin_token and ensure_admin_token(config.admin_email, config.admin_token):
-            click.echo(f"gave {config.admin_email} the API token from CLOUDSIM_ADMIN_TOKEN")
+        if config.admin_token:
+            # a team instance: its master's account and token, whatever happened to them here
+            for restored in restore_master_access(config.admin_email, config.admin_token):
+                click.echo(f"master access: {restored}")
     log_dir = config.instance_dir / "logs"
     supervisor = Supervisor(
         log=lambda line: click.echo(f"cloudsim up: {line}", err=True), log_dir=log_dir
@@ -180,6 +182,10 @@ def up(demo: bool) -> None:
     try:
         for service, timeout in _services(config):
             click.echo(f"starting {service.name}")
+            if service.name == "web":
+                # Redis is up: a team instance serves no login but its master's until the
+                # master has sent its current accounts (auth.master)
+                note_started(config)
             supervisor.add(service, timeout)
         scheme = "https" if config.tls_cert else "http"
         if demo:

@@ -11,6 +11,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import selectinload
 
 from cloudsim.audit.service import record
+from cloudsim.auth.master import refuse_for_master_account
 from cloudsim.auth.passwords import generate_password, hash_password
 from cloudsim.auth.policy import SYSTEM, Actor, require_role, require_team_access
 from cloudsim.auth.session import end_sessions
@@ -311,6 +312,8 @@ def update_user(
     user = get_user(actor, user_id)
     _check_manage(actor, user.role)
     new_role = parse_role(role) if role is not None else user.role
+    if new_role != user.role or active is False or team_id not in (Keep.KEEP, user.team_id):
+        refuse_for_master_account(user, "disabled, demoted or moved")
     _check_manage(actor, new_role)
     changes: dict[str, object] = {}
     old_team = user.team_id
@@ -356,6 +359,7 @@ def delete_user(actor: Actor, user_id: int) -> None:
     """Delete a user (never oneself, never the last admin)."""
     user = get_user(actor, user_id)
     _check_manage(actor, user.role)
+    refuse_for_master_account(user, "deleted")
     if actor.id == user.id:
         raise Forbidden("you cannot delete your own account")
     if user.role == Role.ADMIN:

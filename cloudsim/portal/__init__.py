@@ -25,6 +25,7 @@ def init_app(app: Flask) -> None:
     register_api(app, ingest_api.blp)
     every = app.config["CLOUDSIM"].portal_upload_seconds
     schedule_task(app, outbox.TASK, timedelta(seconds=every))
+    schedule_task(app, outbox.PROBE_TASK, outbox.PROBE_EVERY)  # a master back: sent at once
     schedule_task(app, staging.TASK, staging.EVERY)
 
 

@@ -7,6 +7,10 @@ the master says it has, in pieces of 8 MiB, then asks the master to acknowledge.
 (the master unreachable, a 5xx, a log refused for its checksum) waits, doubling from
 CLOUDSIM_PORTAL_RETRY_SECONDS up to 10 minutes, and holds the rows after it, so runs arrive
 in order; a refusal (a 4xx saying why) is final for that row and holds nothing.
+
+While the master does not answer at all, a cheap probe (every PROBE_EVERY) asks it whether it
+is back; the first answer ends the wait and sends the outbox at once, so a master outage
+delays the portal by seconds, not by the backoff.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ import redis
 from celery import shared_task
 from flask import current_app
 from redis.lock import Lock
-from sqlalchemy import select
+from sqlalchemy import select, update
 
 from cloudsim.competition.artifacts import LogStore
 from cloudsim.config import Config
@@ -34,7 +38,13 @@ from cloudsim.models import (
     utcnow,
 )
 from cloudsim.portal.credentials import portal_endpoint
-from cloudsim.team_instances.client import CallRefused, Endpoint, InstanceError, call
+from cloudsim.team_instances.client import (
+    CallRefused,
+    Endpoint,
+    InstanceError,
+    PinMismatch,
+    call,
+)
 from cloudsim.team_instances.sync import release
 
 PIECE = 8 * 1024 * 1024
@@ -43,6 +53,10 @@ LOCK_SECONDS = 120  # renewed after every piece: a dead uploader frees it this s
 CHECKSUM_TRIES = 3  # a log refused for its checksum this often: the upload is refused
 FINAL = (400, 403, 404)  # the master refused the result itself: sending it again cannot help
 TASK = "cloudsim.portal.upload"
+PROBE_TASK = "cloudsim.portal.probe"
+PROBE_EVERY = timedelta(seconds=2)
+PROBE_TIMEOUT = 1.5
+MASTER_DOWN_KEY = "cloudsim:portal:master-down"  # set while the master does not answer
 
 
 class UploadFailed(Exception):
@@ -198,9 +212,40 @@ def _refuse(upload: PortalUpload, error: str) -> None:
     upload.state, upload.error = UploadState.REFUSED, error
 
 
+def _redis(config: Config) -> redis.Redis:
+    return redis.Redis.from_url(config.effective_redis_url, socket_timeout=5)
+
+
 def _uploader_lock(config: Config) -> Lock:
-    client = redis.Redis.from_url(config.effective_redis_url)
-    return client.lock("cloudsim:portal:upload", timeout=LOCK_SECONDS)
+    return _redis(config).lock("cloudsim:portal:upload", timeout=LOCK_SECONDS)
+
+
+def master_answers(endpoint: Endpoint) -> bool:
+    """Return whether the master's portal answers at all (any answer below 500)."""
+    try:
+        # run 0 is never uploaded: a 404 from the master's ingest is the cheapest answer
+        call(endpoint, "GET", "/portal/ingest/runs/0", timeout=PROBE_TIMEOUT)
+    except CallRefused as exc:
+        return exc.code < 500
+    except (InstanceError, OSError):
+        return False
+    return True
+
+
+def probe_master(config: Config) -> int:
+    """While the master was unreachable: once it answers, end the outbox's wait and send it
+    now; return how many runs were acknowledged."""
+    client = _redis(config)
+    if not client.exists(MASTER_DOWN_KEY):
+        return 0
+    endpoint = portal_endpoint()
+    if endpoint is None or not master_answers(endpoint):
+        return 0
+    client.delete(MASTER_DOWN_KEY)
+    waiting = PortalUpload.state.in_((UploadState.PENDING, UploadState.UPLOADING))
+    db.session.execute(update(PortalUpload).where(waiting).values(next_attempt_at=utcnow()))
+    db.session.commit()
+    return upload_outbox(config)
 
 
 def upload_outbox(config: Config) -> int:
@@ -238,6 +283,8 @@ def upload_outbox(config: Config) -> int:
                 db.session.rollback()
                 _wait(upload, str(exc), config)
                 db.session.commit()
+                if not isinstance(exc, PinMismatch):  # not the master at all: no probing
+                    _redis(config).set(MASTER_DOWN_KEY, "1")
                 break
             db.session.commit()
     finally:
@@ -249,3 +296,9 @@ def upload_outbox(config: Config) -> int:
 def upload() -> int:
     """Send finished runs and their logs to the master's portal (beat)."""
     return upload_outbox(current_app.config["CLOUDSIM"])
+
+
+@shared_task(name=PROBE_TASK)
+def probe() -> int:
+    """While the master is unreachable, notice at once when it answers again (beat)."""
+    return probe_master(current_app.config["CLOUDSIM"])

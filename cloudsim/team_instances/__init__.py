@@ -26,6 +26,8 @@ def init_app(app: Flask) -> None:
     schedule_task(
         app, "cloudsim.team_instances.heartbeat", timedelta(seconds=health.HEARTBEAT_SECONDS)
     )
+    # an instance that answers again is caught up within about a second, not at the next poll
+    schedule_task(app, poll.CATCH_UP_TASK, poll.CATCH_UP_EVERY)
 
 
 def init_cli(cli: LazyGroup) -> None:

@@ -8,17 +8,19 @@ import time
 import click
 from flask import current_app
 
+from cloudsim.auth.master import restore_configured_access
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.cli import app_context, commit, emit, reports_errors
 from cloudsim.cli.files import LoadedText, TextFile
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.cli import follow_job
-from cloudsim.models import TeamInstance
+from cloudsim.models import InstanceState, TeamInstance
 from cloudsim.people.service import find_team
 from cloudsim.providers.service import PROVIDERS, servers_settings
 from cloudsim.team_instances import launch as launches
 from cloudsim.team_instances import service
 from cloudsim.team_instances.poll import check_instances
+from cloudsim.team_instances.restore import restore_access as restore_access_over_ssh
 
 
 def instance_data(instance: TeamInstance) -> dict[str, object]:
@@ -34,6 +36,7 @@ def instance_data(instance: TeamInstance) -> dict[str, object]:
         "checked_at": instance.checked_at,
         "last_sync_at": instance.last_sync_at,
         "sync_error": instance.sync_error,
+        "sync_report": instance.sync_report,
         "launch": instance.launch,
     }
 
@@ -105,6 +108,34 @@ def check(as_json: bool) -> None:
             as_json,
             "\n".join(_line(i) for i in instances) or "no live team instances",
         )
+
+
+@instance.command("restore-access")
+@click.argument("name", required=False)
+@click.option(
+    "--here",
+    is_flag=True,
+    help="On a team instance: restore its master's account and token from its own settings.",
+)
+@reports_errors
+def restore_access(name: str | None, here: bool) -> None:
+    """Give the master back its admin account and token on instance NAME (through its SSH
+    route), then check that the instance answers the master again."""
+    if here == bool(name):
+        raise click.UsageError("name an instance (on the master) or give --here (on it)")
+    with app_context():
+        if here:
+            for line in restore_configured_access() or ["the master's access was whole"]:
+                click.echo(line)
+            return
+        found = service.get_instance(SYSTEM, name or "")
+        for line in restore_access_over_ssh(found, current_app.config["CLOUDSIM"]):
+            click.echo(f"{found.name}: {line}")
+        commit()
+        check_instances(current_app.config["CLOUDSIM"], [found.id])
+        if found.state != InstanceState.READY:
+            raise click.ClickException(f"{found.name} still does not answer: {found.error}")
+        click.echo(f"{found.name}: answers the master again")
 
 
 @instance.command("assign")

@@ -11,8 +11,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from datetime import timedelta
 from typing import Any
 
+import redis
 from celery import shared_task
 from flask import current_app
 from sqlalchemy import select
@@ -37,6 +39,10 @@ from constellations.plans.roles import CLOUDSIM_PORT
 
 PARALLEL = 8
 CALL_TIMEOUT = 10.0
+CATCH_UP_TASK = "cloudsim.team_instances.catch_up"
+CATCH_UP_EVERY = timedelta(seconds=1)
+REFUSING_RECHECK = timedelta(seconds=10)
+CATCH_UP_HEALTH_TIMEOUT = 1.0  # a lagging instance that does not answer this fast: next second
 
 
 def endpoint_of(instance: TeamInstance, config: Config) -> Endpoint:
@@ -74,11 +80,16 @@ class Visit:
     launch: dict[str, Any] | str | None = None
 
 
-def _visit(endpoint: Endpoint, desired: dict[str, Any], launch: dict[str, Any] | None) -> Visit:
+def _visit(
+    endpoint: Endpoint,
+    desired: dict[str, Any],
+    launch: dict[str, Any] | None,
+    health_timeout: float = CALL_TIMEOUT,
+) -> Visit:
     """Check an instance's health, push its desired state (the reconcile), then follow the
     constellation launched through it."""
     try:
-        health = call(endpoint, "GET", "/instance/health", timeout=CALL_TIMEOUT)
+        health = call(endpoint, "GET", "/instance/health", timeout=health_timeout)
     except InstanceError as exc:
         return Visit(str(exc))
     if not isinstance(health, dict):
@@ -96,6 +107,7 @@ def check_instances(
     config: Config,
     ids: list[int] | None = None,
     connect: Callable[[TeamInstance, Config], Endpoint] = endpoint_of,
+    health_timeout: float = CALL_TIMEOUT,
 ) -> list[TeamInstance]:
     """Bring every live instance's state up to date with its constellation and its health,
     and push its desired state. `connect` says how to reach one (bench/ uses stand-ins)."""
@@ -127,7 +139,13 @@ def check_instances(
         with ThreadPoolExecutor(max_workers=PARALLEL) as pool:
             by_id = {i.id: i for i in instances}
             launches = [launch_of(by_id[i]) for i in endpoints]
-            visits = pool.map(_visit, endpoints.values(), [desired[i] for i in endpoints], launches)
+            visits = pool.map(
+                _visit,
+                endpoints.values(),
+                [desired[i] for i in endpoints],
+                launches,
+                [health_timeout] * len(endpoints),
+            )
             answers = dict(zip(endpoints, visits, strict=True))
     finally:
         for lock in locks:
@@ -148,6 +166,39 @@ def check_instances(
             sync_failed(instance, visit.sync)
     db.session.flush()
     return instances
+
+
+def lagging_instances() -> list[int]:
+    """Return the instances behind their master: unreachable, or whose last sync failed."""
+    behind = (TeamInstance.state == InstanceState.UNREACHABLE) | (
+        (TeamInstance.state == InstanceState.READY) & TeamInstance.sync_error.is_not(None)
+    )
+    return list(db.session.scalars(select(TeamInstance.id).where(behind)))
+
+
+def _resting(instance_id: int) -> str:
+    return f"cloudsim:team-instance:{instance_id}:catch-up-rest"
+
+
+def catch_up(config: Config) -> list[TeamInstance]:
+    """Check the lagging instances now: one that answers again gets its desired state at
+    once, not at the next poll (beat, every second; a query when none lags). One that answers
+    but refuses its sync rests REFUSING_RECHECK between tries, so it is not hammered."""
+    client = redis.Redis.from_url(config.effective_redis_url, socket_timeout=5)
+    ids = [i for i in lagging_instances() if not client.exists(_resting(i))]
+    if not ids:
+        return []
+    checked = check_instances(config, ids, health_timeout=CATCH_UP_HEALTH_TIMEOUT)
+    for instance in checked:
+        if instance.state == InstanceState.READY and instance.sync_error:
+            client.set(_resting(instance.id), "1", ex=REFUSING_RECHECK)
+    return checked
+
+
+@shared_task(name=CATCH_UP_TASK)
+def catch_up_task() -> int:
+    """Catch up the lagging team instances that answer again (beat)."""
+    return len(catch_up(current_app.config["CLOUDSIM"]))
 
 
 @shared_task(name="cloudsim.team_instances.poll")

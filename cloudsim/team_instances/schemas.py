@@ -16,6 +16,19 @@ class HealthSchema(Schema):
     worker_seen_seconds_ago = fields.Float(allow_none=True)
 
 
+class SyncResultSchema(Schema):
+    changed = fields.List(fields.Str(), metadata={"description": "what this sync changed"})
+    reported = fields.List(
+        fields.Str(), metadata={"description": "what it found and left for people to decide"}
+    )
+    drift = fields.List(
+        fields.Str(),
+        metadata={
+            "description": "the changes that put back what was changed on the instance by hand"
+        },
+    )
+
+
 class TeamInstanceSchema(Schema):
     id = fields.Int()
     name = fields.Str()
@@ -34,6 +47,13 @@ class TeamInstanceSchema(Schema):
     checked_at = fields.DateTime(allow_none=True)
     last_sync_at = fields.DateTime(allow_none=True)
     sync_error = fields.Str(allow_none=True)
+    sync_report = fields.Nested(
+        SyncResultSchema,
+        metadata={
+            "description": "what the last sync changed, which of it was drift put back, and "
+            "what it reported; every drift is also in the audit log (team_instance.drift)"
+        },
+    )
     launch = fields.Dict(
         allow_none=True,
         metadata={
@@ -160,13 +180,6 @@ class DesiredStateSchema(Schema):
         load_default=None,
         validate=validate.Length(max=100),
         metadata={"description": "every world definition (absent: the worlds are left alone)"},
-    )
-
-
-class SyncResultSchema(Schema):
-    changed = fields.List(fields.Str(), metadata={"description": "what this sync changed"})
-    reported = fields.List(
-        fields.Str(), metadata={"description": "what it found and left for people to decide"}
     )
 
 

@@ -10,7 +10,7 @@ from cloudsim.auth.policy import Actor, require_role
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service as constellations
-from cloudsim.models import InstanceState, Job, Role, Team, TeamInstance
+from cloudsim.models import AuditEvent, InstanceState, Job, Role, Team, TeamInstance
 from cloudsim.models.lookup import by_id_or_name
 from cloudsim.team_instances import lifecycle
 
@@ -36,6 +36,23 @@ def get_instance(actor: Actor, ref: int | str) -> TeamInstance:
     if instance is None:
         raise NotFound.of("team instance", ref)
     return instance
+
+
+def drift_history(actor: Actor, instance: TeamInstance, limit: int = 20) -> list[AuditEvent]:
+    """Return the latest drift put back on the instance, newest first (admins)."""
+    require_role(actor, Role.ADMIN, "see team instances")
+    return list(
+        db.session.scalars(
+            select(AuditEvent)
+            .where(
+                AuditEvent.action == "team_instance.drift",
+                AuditEvent.target_type == "team_instance",
+                AuditEvent.target_id == str(instance.id),
+            )
+            .order_by(AuditEvent.id.desc())
+            .limit(limit)
+        )
+    )
 
 
 def _team(team_id: int | None) -> Team | None:

@@ -100,7 +100,7 @@ def _plain(value: object) -> object:
 def synced(instance: TeamInstance, answer: dict[str, Any]) -> None:
     """Record a sync the instance accepted, and what it changed (drift put back, or news)."""
     instance.last_sync_at, instance.sync_error = utcnow(), None
-    report = {"changed": answer.get("changed", []), "reported": answer.get("reported", [])}
+    report = {key: list(answer.get(key) or []) for key in ("changed", "reported", "drift")}
     instance.sync_report = report
     if report["changed"]:
         record(
@@ -110,6 +110,16 @@ def synced(instance: TeamInstance, answer: dict[str, Any]) -> None:
             target_id=instance.id,
             team_id=instance.team_id,
             changed=report["changed"][:50],
+        )
+    if report["drift"]:
+        # its own event, so that an officer can list every drift ever put back
+        record(
+            "team_instance.drift",
+            SYSTEM,
+            target_type="team_instance",
+            target_id=instance.id,
+            team_id=instance.team_id,
+            put_back=report["drift"][:50],
         )
 
 

@@ -101,6 +101,7 @@ def _show(
         confirm=ConfirmForm(),
         settings=settings or ProviderSettingsForm().offer(),
         kept=launch.kept_settings(instance.id),
+        drift=service.drift_history(current_user, instance),
     ), status
 
 

@@ -13,6 +13,7 @@ from datetime import timedelta
 from pathlib import Path
 
 import pytest
+import redis
 from flask import Flask
 from sqlalchemy import func, select
 
@@ -32,6 +33,7 @@ from cloudsim.models import (
 from cloudsim.portal import outbox
 from cloudsim.portal.credentials import portal_endpoint
 from cloudsim.team_instances.client import call
+from cloudsim.team_instances.health import HEARTBEAT_KEY
 from provisioners.remote import pki
 from tests.conftest import csrf_token, log_in, make_user, running_app, token_for
 from tests.portal.ingest_support import Portal, finished_run, start_master, sync_instance
@@ -172,6 +174,43 @@ def test_an_upload_cut_off_by_the_portal_resumes_after_it_restarts(
         artifact = db.session.scalar(select(Artifact).where(Artifact.filename == "state.msgpack"))
         assert artifact is not None
         assert artifact.sha256 == hashlib.sha256(content).hexdigest() == run.artifacts[0].sha256
+
+
+def test_the_outbox_catches_up_within_10_s_of_the_master_answering_again(
+    portal: Portal, instance: Flask, tmp_path: Path, request: pytest.FixtureRequest
+) -> None:
+    sync_instance(portal, instance.test_client())
+    run = finished_run("Driving 1", {"score.jsonl": b'{"checkpoint": 1}\n' * 10}, tmp_path)
+    config: Config = instance.config["CLOUDSIM"]
+    portal.server.kill()  # an outage of the master
+    assert outbox.upload_outbox(config) == 0
+    row = db.session.scalar(select(PortalUpload).where(PortalUpload.run_id == run.id))
+    assert row is not None and "unreachable" in (row.error or ""), row
+    # a long outage: the wait has doubled up to the report's 160 s
+    row.attempts, row.next_attempt_at = 6, utcnow() + timedelta(seconds=160)
+    db.session.commit()
+    worker = worker_process(
+        config, request.config.rootpath, beat_schedule=tmp_path / "beat-schedule"
+    )
+    try:
+        # the worker and its beat are up once the beat's first heartbeat was taken
+        beats = redis.Redis.from_url(config.effective_redis_url)
+        wait_for(lambda: beats.exists(HEARTBEAT_KEY), 60, "the instance's worker and beat")
+        portal.server.start()
+        endpoint = portal_endpoint()
+        assert endpoint is not None
+        # the clock starts when the master answers (its port opens before its app is loaded)
+        wait_for(lambda: outbox.master_answers(endpoint), 60, "the master answering again")
+
+        def uploaded() -> bool:
+            db.session.rollback()
+            db.session.refresh(row)
+            return row.state == UploadState.UPLOADED
+
+        wait_for(uploaded, 10, "the run on the portal within 10 s of the master answering")
+    finally:
+        kill_worker(worker)
+    assert _master_run(portal, run.id) is not None
 
 
 def test_results_the_instance_may_not_send_are_refused_and_shown_to_officers(

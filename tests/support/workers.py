@@ -19,8 +19,10 @@ def worker_process(
     root: Path,
     app: str = "tests.support.worker_app",
     extra_env: dict[str, str] | None = None,
+    beat_schedule: Path | None = None,
 ) -> subprocess.Popen[bytes]:
-    """Start a prefork worker (one pool process) on the config's database and Redis.
+    """Start a prefork worker (one pool process) on the config's database and Redis; with
+    `beat_schedule`, the beat too, inside it (every periodic task, as `cloudsim up` sends).
 
     root is the project's folder (pytest's rootpath), where `tests.support` is imported from;
     app the module of its Celery app; extra_env more environment for it.
@@ -57,6 +59,8 @@ def worker_process(
         "--without-mingle",
         "--without-gossip",
     ]
+    if beat_schedule is not None:
+        argv += ["--beat", "--schedule", str(beat_schedule)]
     return subprocess.Popen(
         argv, env=env, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
     )

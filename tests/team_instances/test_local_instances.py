@@ -7,20 +7,23 @@ import base64
 import hashlib
 import shlex
 import subprocess
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, cast
 
 import pytest
+from click.testing import CliRunner
 from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 from drcsim.worlds import document_digest, shipped_document
-from flask import Flask
+from flask import Flask, current_app
 from playwright.sync_api import Browser, Page, Playwright, expect, sync_playwright
 from sqlalchemy import select
 
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.auth.ssh_keys import add_key
+from cloudsim.cli import main
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations.keys import (
@@ -40,8 +43,9 @@ from cloudsim.models import (
 )
 from cloudsim.people.service import create_team, update_user
 from cloudsim.providers.service import open_provider
-from cloudsim.team_instances.client import call
-from cloudsim.team_instances.poll import check_instances, endpoint_of
+from cloudsim.team_instances.client import CallRefused, call
+from cloudsim.team_instances.poll import CATCH_UP_EVERY, catch_up, check_instances, endpoint_of
+from cloudsim.team_instances.restore import run_on_instance, with_settings
 from cloudsim.worlds.service import update_world
 from tests.competition.support import open_task
 from tests.conftest import PASSWORD, csrf_token, log_in, make_user, token_for
@@ -62,6 +66,9 @@ def ready(config: Config) -> list[TeamInstance] | None:
     return instances if done else None
 
 
+# two real CloudSims deployed, then propagation, seizure, restore and catch-up: ~10 min on a
+# loaded 2-core machine, over the suite's default 600 s
+@pytest.mark.timeout(1500)
 def test_master_deploys_team_instances_and_pins_their_certificates(
     constellations_app: Flask,
     constellations_worker: None,
@@ -240,20 +247,34 @@ def _propagation(
     assert _world(config, on_a)["digest"] == document_digest(world)
     assert on_instance(on_a, config, f"/users/{theirs['id']}")["role"] == "user"
     assert on_a.last_sync_at is not None and on_a.sync_error is None
+    _seized(config, on_a, member_a, theirs["id"])
 
     # A cut between the master and A (here: A's certificate no longer matches the pin): the
     # sync jobs for A fail and A's page says why it is behind; B still gets every change;
     # once A answers again, the reconcile catches it up.
+    leaving = make_user(Role.USER, team_a)
+    in_a = wanted_a | {leaving.email}
+    _until(lambda: _synced(config, on_a, in_a, "Walking for A, edited"), "a new member on A")
+    assert _active_on(config, on_a, leaving.email)
     pinned, on_a.cert_fingerprint = on_a.cert_fingerprint, "00" * 32
     db.session.commit()
     late = make_user(Role.OFFICER)  # every instance's
+    update_user(SYSTEM, leaving.id, active=False)  # disabled while A cannot hear of it
+    db.session.commit()
     wanted_b = {member_b.email, officer.email, late.email}
     _until(lambda: _synced(config, on_b, wanted_b, "Driving for B"), "B while A is cut off")
     _until(lambda: _behind(on_a), "A's page saying why it is behind")
     on_a.cert_fingerprint = pinned
     db.session.commit()
-    check_instances(config, [on_a.id])
-    db.session.commit()
+    # A answers again: the catch-up (beat, every second; ticked here as the beat would) brings
+    # it up to date within about 2 s, not at the next poll.
+    beat = _Beat(config)
+    wait_for(
+        lambda: beat.tick() and not _active_on(config, on_a, leaving.email),
+        CATCH_UP_DEADLINE,
+        "the member disabled on the master disabled on A, once A answers again",
+    )
+    db.session.refresh(on_a)
     assert on_a.sync_error is None and _synced(
         config, on_a, wanted_a | {late.email}, "Walking for A, edited"
     )
@@ -281,6 +302,96 @@ def _propagation(
         page.goto(f"{base}/tasks")
         expect(page.get_by_label("Password")).to_be_visible()  # sent back to the login form
         browser.close()
+
+
+CATCH_UP_DEADLINE = 2.5  # the 2 s promised, and a tick's own time
+
+
+class _Beat:
+    """Send the catch-up as the beat does: at most once a second."""
+
+    def __init__(self, config: Config) -> None:
+        self.config, self.last = config, 0.0
+
+    def tick(self) -> bool:
+        if time.monotonic() - self.last >= CATCH_UP_EVERY.total_seconds():
+            self.last = time.monotonic()
+            db.session.expire_all()
+            catch_up(self.config)
+            db.session.commit()
+        return True
+
+
+def _active_on(config: Config, instance: TeamInstance, email: str) -> bool:
+    users = on_instance(instance, config, "/users?page_size=500")
+    return bool(next(u for u in users if u["email"] == email)["active"])
+
+
+def _seized(config: Config, on_a: TeamInstance, member: User, member_id: int) -> None:
+    """The report's seizure of an instance, and what stops it: a member made an admin by hand
+    (the documented call) and an admin account made there are put back by the reconcile, the
+    master's page, API and audit log show the drift; the master's own account cannot be
+    disabled there, and `cloudsim instance restore-access` gives it back when it was lost."""
+    on_instance(on_a, config, f"/users/{member_id}", method="PATCH", body={"role": "admin"})
+    made = {"email": "made-here@example.org", "role": "admin", "password": "x" * 16}
+    local = on_instance(on_a, config, "/users", method="POST", body=made)
+    check_instances(config, [on_a.id])
+    db.session.commit()
+    drift = on_a.sync_report["drift"]
+    assert f"user {member.email}: role, team_id" in drift, on_a.sync_report
+    assert "user made-here@example.org (admin) disabled: made here" in drift
+    assert on_instance(on_a, config, f"/users/{member_id}")["role"] == "user"
+    assert not on_instance(on_a, config, f"/users/{local['id']}")["active"]
+    admin = token_for(make_user(Role.ADMIN))
+    client = current_app.test_client()
+    shown = client.get(f"/api/v1/team-instances/{on_a.id}", headers=admin).get_json()
+    assert shown["sync_report"]["drift"] == drift
+    audit = client.get("/api/v1/audit?action=team_instance.drift", headers=admin).get_json()
+    assert audit[0]["target_id"] == str(on_a.id) and audit[0]["details"]["put_back"] == drift
+
+    # The master's own account on the instance cannot be disabled there ...
+    me = on_instance(on_a, config, "/me")
+    with pytest.raises(CallRefused) as refused:
+        on_instance(on_a, config, f"/users/{me['id']}", method="PATCH", body={"active": False})
+    assert refused.value.code == 409 and "master manages" in str(refused.value)
+    # ... but it can be lost anyway (here: every token revoked in the instance's database by
+    # root on its machine); the documented command on the master gives it back.
+    run_on_instance(on_a, config, with_settings(["python", "-c", REVOKE_EVERY_TOKEN]))
+    with pytest.raises(CallRefused) as refused:
+        on_instance(on_a, config, "/me")
+    assert refused.value.code == 401
+    result = CliRunner().invoke(main, ["instance", "restore-access", on_a.name], env=_env(config))
+    assert result.exit_code == 0, result.output
+    assert f"{on_a.name}: the master's token un-revoked" in result.output
+    assert f"{on_a.name}: answers the master again" in result.output
+    assert on_instance(on_a, config, "/me")["id"] == me["id"]
+
+
+REVOKE_EVERY_TOKEN = """
+from sqlalchemy import update
+from cloudsim.app import create_app
+from cloudsim.cli import main
+from cloudsim.config import Config
+from cloudsim.extensions import db
+from cloudsim.models import ApiToken, utcnow
+with create_app(Config.from_env()).app_context():
+    db.session.execute(update(ApiToken).values(revoked_at=utcnow()))
+    db.session.commit()
+"""
+
+
+def _env(config: Config) -> dict[str, str]:
+    """Return the settings of the test's master as `cloudsim` commands read them."""
+    return {
+        "CLOUDSIM_INSTANCE_DIR": str(config.instance_dir),
+        "CLOUDSIM_DATABASE_URL": config.database_url,
+        "CLOUDSIM_REDIS_URL": config.effective_redis_url,
+        "CLOUDSIM_ENCRYPTION_KEYS": ",".join(config.encryption_keys),
+        "CLOUDSIM_SECRET_KEY": config.secret_key,
+        "CLOUDSIM_LOCAL_PREFIX": config.local_prefix,
+        "CLOUDSIM_LOCAL_SUBNET_POOL": config.local_subnet_pool,
+        "CLOUDSIM_LOCAL_PUBLIC_CIDR": config.local_public_cidr,
+    }
 
 
 def instance_browser(
