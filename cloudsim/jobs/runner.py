@@ -140,16 +140,19 @@ class JobContext:
         self._warned_held = False
 
     def interrupted(self) -> str | None:
-        """Return why the job must stop now (cancelled, or stalled), or None; cheap enough to
-        call between any two remote steps and from any thread."""
-        if self.stalled is not None:
-            return self.stalled
+        """Return why the job must stop now (cancelled, or stalled), or None: what an SSH
+        executor asks before each remote step, from any thread, and every second in one."""
         if self._session.info.get(WROTE) and not self._warned_held:
             # a bug to fix where it happens (checkpoint() before talking to machines): on
             # SQLite every other writer, the web's included, waits for this transaction
             self._warned_held = True
             log.warning("job %s: %s", self._job_id, HELD)
             self.log(f"warning: {HELD}")
+        return self._reason()
+
+    def _reason(self) -> str | None:
+        if self.stalled is not None:
+            return self.stalled
         if self._cancelled is None and time.monotonic() - self._cancel_read >= CANCEL_POLL_SECONDS:
             self._cancel_read = time.monotonic()
             try:
@@ -163,7 +166,7 @@ class JobContext:
 
     def check(self) -> None:
         """Stop the job here (raise) when it was cancelled or stalled."""
-        reason = self.interrupted()
+        reason = self._reason()
         if reason is None:
             return
         if self.stalled is not None:

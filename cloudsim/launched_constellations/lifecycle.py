@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from cloudsim.auth.policy import Actor
+from cloudsim.jobs.control import cancel_jobs
 from cloudsim.jobs.runner import Payload
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Constellation, ConstellationState, Job, Machine, MachineState
@@ -42,10 +43,20 @@ def retry(actor: Actor, constellation: Constellation) -> Job:
     return start_launch(actor, constellation)
 
 
+TERMINATE_JOB = "constellation.terminate"
+
+
 def start_terminate(actor: Actor, constellation: Constellation) -> Job:
-    """Mark a constellation terminating and start the job that releases its resources."""
+    """Mark a constellation terminating, ask its other jobs (a launch, an access push) to stop
+    at their next step, and start the job that releases its resources."""
     constellation.state = ConstellationState.TERMINATING
-    return _start_job(actor, constellation, "constellation.terminate")
+    cancel_jobs(
+        "constellation",
+        constellation.id,
+        f"{constellation.name} is being terminated",
+        keep=[TERMINATE_JOB],
+    )
+    return _start_job(actor, constellation, TERMINATE_JOB)
 
 
 def start_refresh_access(actor: Actor, constellation: Constellation) -> Job:
@@ -59,10 +70,14 @@ def launching(constellation: Constellation) -> None:
     constellation.state, constellation.error = ConstellationState.LAUNCHING, None
 
 
-def failed(constellation: Constellation, error: str) -> None:
-    """Mark a constellation's launch as failed, with why."""
+def failed(constellation: Constellation, error: str) -> bool:
+    """Mark a constellation's launch as failed, with why; never one being terminated (a
+    terminate wins over the launch it stopped). Return whether it was marked."""
+    if constellation.state in (ConstellationState.TERMINATING, ConstellationState.TERMINATED):
+        return False
     constellation.state = ConstellationState.ERROR
     constellation.error = error
+    return True
 
 
 def ready(constellation: Constellation) -> None:
