@@ -39,13 +39,13 @@ def test_a_job_stuck_outside_any_step_is_failed_and_its_worker_slot_freed(
         try:
             stuck = enqueue("test.stuck", SYSTEM, job_kinds.Stuck())
             after = enqueue("test.slow", SYSTEM, job_kinds.Slow(str(markers), steps=2))
-            done = job_finished(stuck.id, 60)
+            done = job_finished(stuck.id, 180)
             assert done.state == JobState.FAILED
             assert "no progress for" in (done.error or "")
             assert "CLOUDSIM_JOB_STALL_SECONDS=2" in (done.error or "")
             assert "its worker process was ended" in (done.error or "")
             # the one slot works again: the job queued behind the stuck one runs
-            assert job_finished(after.id, 60).state == JobState.SUCCEEDED
+            assert job_finished(after.id, 180).state == JobState.SUCCEEDED
             db.session.expire_all()
             assert db.session.get(type(done), stuck.id).state == JobState.FAILED  # not re-run
         finally:
