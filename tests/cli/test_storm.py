@@ -137,7 +137,12 @@ class Clients:
             return
         start = time.perf_counter()
         try:
-            status = http.get(self.base + path, timeout=120).status_code
+            try:
+                status = http.get(self.base + path, timeout=120).status_code
+            except requests.ConnectionError:
+                # the server closed this kept-alive connection as the request left (its
+                # keep-alive timeout): a browser sends the GET again, and so do we
+                status = http.get(self.base + path, timeout=120).status_code
         except requests.RequestException:
             status = 0  # no answer at all: counted, and the test fails on it
         with self._lock:
