@@ -92,6 +92,11 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_JOB_LEASE_SECONDS": Setting(
         "30", "A running job whose worker has not renewed its lease this long is resumed elsewhere"
     ),
+    "CLOUDSIM_JOB_STALL_SECONDS": Setting(
+        "300",
+        "A running job that reports nothing (no stage, progress or log line) this long is stopped"
+        " at its next remote step and fails with the reason, freeing its worker slot",
+    ),
     "CLOUDSIM_STALE_JOB_SECONDS": Setting(
         "300", "A job queued this long without starting is sent to the queue again"
     ),
@@ -260,6 +265,7 @@ class Config:
     login_limit: str
     job_visibility_timeout: int
     job_lease_seconds: int
+    job_stall_seconds: int
     stale_job_seconds: int
     local_prefix: str
     local_subnet_pool: str
@@ -405,6 +411,7 @@ class Config:
             login_limit=get("CLOUDSIM_LOGIN_LIMIT"),
             job_visibility_timeout=number("CLOUDSIM_JOB_VISIBILITY_TIMEOUT"),
             job_lease_seconds=number("CLOUDSIM_JOB_LEASE_SECONDS"),
+            job_stall_seconds=positive("CLOUDSIM_JOB_STALL_SECONDS"),
             stale_job_seconds=number("CLOUDSIM_STALE_JOB_SECONDS"),
             local_prefix=get("CLOUDSIM_LOCAL_PREFIX"),
             local_subnet_pool=get("CLOUDSIM_LOCAL_SUBNET_POOL"),

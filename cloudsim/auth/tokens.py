@@ -7,11 +7,13 @@ import secrets
 from dataclasses import dataclass
 from datetime import timedelta
 
-from sqlalchemy import select
+from sqlalchemy import select, update
 from sqlalchemy.orm import joinedload
+from sqlalchemy.orm.attributes import set_committed_value
 
 from cloudsim.audit.service import record
 from cloudsim.auth.master import is_master_token
+from cloudsim.busy import try_write
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.models import ApiToken, User, utcnow
@@ -93,5 +95,9 @@ def user_for_token(plaintext: str) -> User | None:
     # Noting every use would make every API read a database write (SQLite serialises them
     # all): "last used" to the minute is what the account page needs.
     if token.last_used_at is None or now - token.last_used_at >= USE_NOTED_EVERY:
-        token.last_used_at = now  # committed with the request
+        # Bookkeeping on its own short connection, skipped when the database is busy: a read
+        # must never wait for (or fail on) another transaction's write lock.
+        noted = update(ApiToken).where(ApiToken.id == token.id).values(last_used_at=now)
+        if try_write(db.engine, noted):
+            set_committed_value(token, "last_used_at", now)
     return token.user

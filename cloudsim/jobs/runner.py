@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 import traceback
 import types
 from collections.abc import Callable, Iterable
@@ -13,13 +14,17 @@ from typing import Any, TypeVar, Union, get_args, get_origin, get_type_hints
 
 from celery import shared_task
 from flask import current_app
-from sqlalchemy import Update, event, func, or_, update
+from sqlalchemy import Update, event, func, or_, select, update
+from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import ORMExecuteState, Session
 from sqlalchemy.orm.attributes import set_committed_value
 
 from cloudsim import logcontext
+from cloudsim.busy import retry_busy
 from cloudsim.errors import CloudSimError, InvalidInput, NotFound
 from cloudsim.extensions import db
+from cloudsim.jobs.control import JobCancelled, JobStalled
+from cloudsim.jobs.heartbeat import Heartbeat, in_pool_process
 from cloudsim.models import Job, JobState, utcnow
 
 log = logging.getLogger(__name__)
@@ -34,6 +39,8 @@ PAYLOADS: dict[str, type[Payload]] = {}
 MAINTENANCE_KINDS: set[str] = set()
 MASK = "***"
 WROTE = "cloudsim.wrote"  # session.info: the session's transaction has written
+CANCEL_POLL_SECONDS = 1.0  # how often a running job reads its cancel flag, at most
+HELD = "remote step while the job's transaction holds uncommitted writes"
 
 
 class JobGone(Exception):
@@ -127,6 +134,56 @@ class JobContext:
         self._session = db.session()  # the body's session, also seen from its worker threads
         self._pending: list[tuple[dict[str, object], str]] = []
         self._lock = threading.Lock()
+        self.last_progress = time.monotonic()  # what the watchdog looks at
+        self.stalled: str | None = None  # the watchdog's reason to stop
+        self._cancelled: str | None = job.cancel_reason
+        self._cancel_read = 0.0
+        self._warned_held = False
+
+    def interrupted(self) -> str | None:
+        """Return why the job must stop now (cancelled, or stalled), or None: what an SSH
+        executor asks before each remote step, from any thread, and every second in one."""
+        if self._session.info.get(WROTE) and not self._warned_held:
+            # a bug to fix where it happens (checkpoint() before talking to machines): on
+            # SQLite every other writer, the web's included, waits for this transaction
+            self._warned_held = True
+            log.warning("job %s: %s", self._job_id, HELD)
+            self.log(f"warning: {HELD}")
+        return self._reason()
+
+    def _reason(self) -> str | None:
+        if self.stalled is not None:
+            return self.stalled
+        if self._cancelled is None and time.monotonic() - self._cancel_read >= CANCEL_POLL_SECONDS:
+            self._cancel_read = time.monotonic()
+            try:
+                with self._engine.connect() as conn:
+                    self._cancelled = conn.scalar(
+                        select(Job.cancel_reason).where(Job.id == self._job_id)
+                    )
+            except OperationalError:
+                pass  # busy: read again at the next step
+        return None if self._cancelled is None else f"cancelled: {self._cancelled}"
+
+    def check(self) -> None:
+        """Stop the job here (raise) when it was cancelled or stalled."""
+        reason = self._reason()
+        if reason is None:
+            return
+        if self.stalled is not None:
+            raise JobStalled(reason)
+        raise JobCancelled(reason)
+
+    def cancelled(self) -> str | None:
+        """Return why the job was cancelled, read now (not a cached answer), or None."""
+        with self._engine.connect() as conn:
+            reason = conn.scalar(select(Job.cancel_reason).where(Job.id == self._job_id))
+        self._cancelled = reason or self._cancelled
+        return self._cancelled
+
+    def stall(self, reason: str) -> None:
+        """Have the job stop at its next remote step (the watchdog's call)."""
+        self.stalled = reason
 
     def load(self, model: type[T], row_id: int) -> T:
         """Return a row the payload names; fail loudly when it is gone (a job takes an id and
@@ -163,7 +220,9 @@ class JobContext:
         return append
 
     def stage(self, name: str, progress: int | None = None) -> None:
-        """Enter a named stage, optionally setting progress (0-100)."""
+        """Enter a named stage, optionally setting progress (0-100); a cancelled or stalled
+        job stops here instead."""
+        self.check()
         values: dict[str, object] = {"stage": name}
         if progress is not None:
             values["progress"] = max(0, min(100, progress))
@@ -176,7 +235,16 @@ class JobContext:
 
     def checkpoint(self) -> None:
         """Commit the body's domain changes so far: what exists outside the database (a cloud
-        node, a network) is recorded the moment it exists, so a resumed job finds it."""
+        node, a network) is recorded the moment it exists, so a resumed job finds it.
+
+        A cancelled job's changes are never committed: the flag is read in the same
+        transaction (on SQLite, once it wrote, the one that sets the flag waits for this one).
+        """
+        reason = db.session.scalar(select(Job.cancel_reason).where(Job.id == self._job_id))
+        if reason is not None:
+            db.session.rollback()
+            self._cancelled = reason
+            raise JobCancelled(f"cancelled: {reason}")
         db.session.commit()
         self.flush_reports()
 
@@ -185,9 +253,7 @@ class JobContext:
         with self._lock:
             pending, self._pending = self._pending, []
             if pending:
-                with self._engine.begin() as conn:
-                    for values, text in pending:
-                        conn.execute(self._update(values, text))
+                retry_busy(lambda: self._write(pending))
 
     def fold_reports_into(self, job: Job) -> None:
         """Put the held-back reports into the job row's own update (its final commit)."""
@@ -200,7 +266,13 @@ class JobContext:
         if text:
             job.log = Job.log.concat(text)  # type: ignore[assignment]
 
+    def _write(self, reports: list[tuple[dict[str, object], str]]) -> None:
+        with self._engine.begin() as conn:
+            for values, text in reports:
+                conn.execute(self._update(values, text))
+
     def _report(self, values: dict[str, object], text: str) -> None:
+        self.last_progress = time.monotonic()
         for key, value in values.items():  # keep the body's view current without dirtying it
             set_committed_value(self.job, key, value)
         with self._lock:
@@ -210,8 +282,7 @@ class JobContext:
                 self._pending.append((values, text))
                 return
         self.flush_reports()
-        with self._engine.begin() as conn:
-            conn.execute(self._update(values, text))
+        retry_busy(lambda: self._write([(values, text)]))
 
     def _update(self, values: dict[str, object], text: str) -> Update:
         return (
@@ -266,27 +337,6 @@ def _claim(job_id: str, lease: int) -> bool:
     return result.rowcount == 1  # type: ignore[attr-defined]
 
 
-class _Heartbeat(threading.Thread):
-    """Renew the job's lease on its own connection while the body runs."""
-
-    def __init__(self, job_id: str, interval: float) -> None:
-        super().__init__(name=f"job-heartbeat-{job_id[:8]}", daemon=True)
-        self.job_id = job_id
-        self.interval = interval
-        self.stopped = threading.Event()
-        self.engine = db.engine
-
-    def run(self) -> None:
-        while not self.stopped.wait(self.interval):
-            try:
-                with self.engine.begin() as conn:
-                    conn.execute(
-                        update(Job).where(Job.id == self.job_id).values(heartbeat_at=utcnow())
-                    )
-            except Exception:  # the next beat retries; the lease tolerates a missed one
-                log.warning("job %s: heartbeat failed", self.job_id, exc_info=True)
-
-
 @shared_task(name="cloudsim.jobs.run", bind=True, acks_late=True, reject_on_worker_lost=True)
 def run_job(self: object, job_id: str) -> str:
     """Run one job to a final state; a duplicate or late delivery does nothing."""
@@ -303,7 +353,12 @@ def run_job(self: object, job_id: str) -> str:
     if job.attempts > 1:
         ctx.log(f"resuming after an interrupted attempt (attempt {job.attempts})")
     body = JOB_KINDS.get(job.kind)
-    heartbeat = _Heartbeat(job_id, max(1.0, lease / 4))
+    settings = current_app.config["CLOUDSIM"]
+    # ending the process frees the slot only in a worker's pool process, never in a command
+    can_exit = not getattr(getattr(self, "request", None), "called_directly", True)
+    can_exit = can_exit and in_pool_process()
+    stall = settings.job_stall_seconds
+    heartbeat = Heartbeat(ctx, min(max(1.0, lease / 4), max(0.5, stall / 4)), stall, can_exit)
     heartbeat.start()
     about = logcontext.about_target(job.target_type, job.target_id)
     with logcontext.bound(job_id=job_id, **about):  # every line logged meanwhile names them

@@ -21,6 +21,7 @@ from cloudsim.config import Config
 from cloudsim.error_codes import LAUNCH_FAILED, LAUNCH_PROVIDER, LAUNCH_UNREACHABLE
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
+from cloudsim.jobs.control import JobCancelled, cancel_jobs, wait_until_stopped
 from cloudsim.jobs.runner import JobContext, job_kind
 from cloudsim.launched_constellations import lifecycle
 from cloudsim.launched_constellations.access import TEAM_KINDS, refresh_turn, team_members
@@ -59,6 +60,9 @@ from provisioners.providers.errors import ProviderError
 from provisioners.remote.ssh import ConnectPolicy, SSHError, SSHExecutor, SSHTarget
 
 T = TypeVar("T")
+# how long a terminate waits for the constellation's other jobs to stop (they check their
+# cancel flag every second while they talk to machines; making a machine is one step)
+STOP_WAIT_SECONDS = 120
 
 
 class ProvisioningError(CloudSimError):
@@ -77,17 +81,23 @@ def launch_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     deployed = _team_access(constellation)  # the install below deploys these, or newer ones
     try:
         _launch(ctx, constellation, kind, config)
+        ctx.check()  # the last step: a terminate asked before it wins
     except Exception as exc:
         db.session.rollback()
+        if (reason := ctx.cancelled()) is not None:
+            # the terminate owns the constellation now: write nothing, leave nothing behind
+            ctx.log(f"stopped: {reason}")
+            _release_if_terminated(ctx, job.constellation_id, config)
+            raise JobCancelled(f"cancelled: {reason}") from exc
         constellation = ctx.load(Constellation, job.constellation_id)
-        lifecycle.failed(
+        if lifecycle.failed(
             constellation, ctx.masked(f"{ctx.job.stage}: {exc}"), launch_error_code(exc)
-        )
-        ctx.checkpoint()  # the error state survives the runner's rollback
+        ):
+            ctx.checkpoint()  # the error state survives the runner's rollback
         raise
-    lifecycle.ready(constellation)
     ctx.stage("ready", 100)
-    ctx.checkpoint()  # ready first: a change from now on starts its own push
+    lifecycle.ready(constellation)
+    ctx.checkpoint()  # ready first (unless cancelled): a change from now on starts its own push
     if constellation.kind in TEAM_KINDS and _team_access(constellation) != deployed:
         # changed while launching, when no push runs: the field computers have the old ones
         ctx.log("the team's members, keys or sudo changed during the launch: pushing them again")
@@ -105,6 +115,32 @@ def launch_error_code(exc: BaseException) -> str:
     return LAUNCH_FAILED
 
 
+def _release_if_terminated(ctx: JobContext, constellation_id: int, config: Config) -> None:
+    """Destroy what a cancelled launch made when the terminate finished before it stopped
+    (it did not wait long enough): its machines and network must not outlive it."""
+    db.session.expire_all()
+    constellation = ctx.load(Constellation, constellation_id)
+    if constellation.state != ConstellationState.TERMINATED:
+        return  # the terminate job still runs: it releases everything once this job ends
+    provider = open_provider(constellation.provider, config)
+    released = release(ctx, provider, constellation.name)
+    ctx.log(f"the terminate had already ended: released {released} machine(s) made since")
+
+
+def release(ctx: JobContext, provider: Provider, name: str) -> int:
+    """Destroy a constellation's machines and network at the provider; return how many
+    machines there were."""
+    driver = provider.driver
+    nodes = provider.nodes(name)
+    _in_parallel(nodes, lambda node: driver.destroy_node(node), lambda node: node.name)
+    ctx.log(f"destroyed {len(nodes)} machine(s)")
+    network = {n.name: n for n in driver.ex_list_networks()}.get(name)
+    if network is not None:
+        driver.ex_destroy_network(network)
+        ctx.log(f"destroyed network {network.name}")
+    return len(nodes)
+
+
 def _team_access(constellation: Constellation) -> tuple[tuple[MemberAccount, ...], bool]:
     """Return what the field computers get: the members' accounts and keys, and sudo or not."""
     return team_members(constellation.team_id), constellation.team_sudo
@@ -115,6 +151,7 @@ def _launch(
 ) -> None:
     ctx.stage("keys", 2)
     keys = constellation_keypair(constellation)
+    ctx.checkpoint()  # made once and kept before the provider is asked for anything
     provider = open_provider(constellation.provider, config)
     driver = provider.driver
     ctx.stage("network", 5)
@@ -131,6 +168,7 @@ def _launch(
         log_sink=ctx.line_sink(),
         secrets=[keys.private],
         connect_policy=ConnectPolicy(deadline=120),
+        interrupt=ctx.interrupted,
     )
     with executor:
         reach = targets(constellation, keys, config)
@@ -190,7 +228,10 @@ def _refresh_access(ctx: JobContext, job: ConstellationJob) -> None:
     keys = constellation_keypair(constellation)
     subnet = constellation.resources["subnet"]
     with SSHExecutor(
-        machine_host_keys(constellation), log_sink=ctx.line_sink(), secrets=[keys.private]
+        machine_host_keys(constellation),
+        log_sink=ctx.line_sink(),
+        secrets=[keys.private],
+        interrupt=ctx.interrupted,
     ) as executor:
         reach = targets(constellation, keys, config)
         contexts = {
@@ -378,6 +419,26 @@ def terminate_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     config: Config = current_app.config["CLOUDSIM"]
     lifecycle.terminating(constellation)
     forget_connections(constellation)  # other processes' beats forget them on their own
+    # a launch (or push) started before the terminate, or sent since: told to stop, and
+    # waited for, so that what it makes up to its next step is released below
+    cancel_jobs(
+        "constellation",
+        constellation.id,
+        f"{constellation.name} is being terminated",
+        keep=[lifecycle.TERMINATE_JOB],
+    )
+    ctx.checkpoint()
+    ctx.stage("stopping its jobs", 5)
+    still = wait_until_stopped(
+        "constellation",
+        constellation.id,
+        STOP_WAIT_SECONDS,
+        keep=[lifecycle.TERMINATE_JOB],
+        besides=ctx.job.id,
+        log=ctx.log,
+    )
+    if still:
+        ctx.log(f"job(s) {', '.join(still)} still running: each releases what it makes later")
     ctx.stage("machines", 10)
     provider = open_provider(constellation.provider, config)
     driver = provider.driver

@@ -12,9 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from cloudsim.auth.policy import Actor
+from cloudsim.jobs.control import cancel_jobs
 from cloudsim.jobs.runner import Payload
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Constellation, ConstellationState, Job, Machine, MachineState
+from cloudsim.models.machines import GONE
 
 # The error of a constellation whose terminate is incomplete starts with this.
 TERMINATE_INCOMPLETE = "terminate incomplete: "
@@ -46,10 +48,20 @@ def retry(actor: Actor, constellation: Constellation) -> Job:
     return start_launch(actor, constellation)
 
 
+TERMINATE_JOB = "constellation.terminate"
+
+
 def start_terminate(actor: Actor, constellation: Constellation) -> Job:
-    """Mark a constellation terminating and start the job that releases its resources."""
+    """Mark a constellation terminating, ask its other jobs (a launch, an access push) to stop
+    at their next step, and start the job that releases its resources."""
     constellation.state = ConstellationState.TERMINATING
-    return _start_job(actor, constellation, "constellation.terminate")
+    cancel_jobs(
+        "constellation",
+        constellation.id,
+        f"{constellation.name} is being terminated",
+        keep=[TERMINATE_JOB],
+    )
+    return _start_job(actor, constellation, TERMINATE_JOB)
 
 
 def start_refresh_access(actor: Actor, constellation: Constellation) -> Job:
@@ -64,10 +76,15 @@ def launching(constellation: Constellation) -> None:
     constellation.error_code = None
 
 
-def failed(constellation: Constellation, error: str, code: str | None = None) -> None:
-    """Mark a constellation's launch as failed, with why (and its code, cloudsim.error_codes)."""
+def failed(constellation: Constellation, error: str, code: str | None = None) -> bool:
+    """Mark a constellation's launch as failed, with why (and its code, cloudsim.error_codes);
+    never one being terminated (a terminate wins over the launch it stopped). Return whether it
+    was marked."""
+    if constellation.state in GONE:
+        return False
     constellation.state = ConstellationState.ERROR
     constellation.error, constellation.error_code = error, code
+    return True
 
 
 def ready(constellation: Constellation) -> None:

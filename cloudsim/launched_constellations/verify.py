@@ -41,15 +41,18 @@ class Retry:
 
     seconds: float
     log: Callable[[str], None]
+    check: Callable[[], None] = lambda: None  # raises when the job must stop
     first_wait: float = 1.0
     longest_wait: float = 10.0
     deadline: float | None = None  # starts at the first retry
 
     def until(self, name: str, attempt: Callable[[], tuple[bool, T]]) -> T:
         """Return attempt's value once it reports success, or its last one when time is up."""
+        self.check()
         ok, value = attempt()
         tries, wait = 1, self.first_wait
         while not ok:
+            self.check()
             now = time.monotonic()
             if self.deadline is None:
                 self.deadline = now + self.seconds
@@ -60,6 +63,7 @@ class Retry:
             pause = min(wait, left)
             self.log(f"{name}: failed (try {tries}), retrying in {pause:.0f} s ({left:.0f} s left)")
             time.sleep(pause)
+            self.check()
             tries, wait = tries + 1, min(wait * 2, self.longest_wait)
             ok, value = attempt()
         if tries > 1:
@@ -90,7 +94,7 @@ def verify_constellation(
     the failures."""
     results: dict[str, dict[str, Any]] = {m.name: {"checks": []} for m in constellation.machines}
     failures: list[str] = []
-    retry = Retry(retry_seconds, ctx.log)
+    retry = Retry(retry_seconds, ctx.log, ctx.check)
 
     def hostname(target: SSHTarget) -> str | Exception:
         try:

@@ -53,6 +53,8 @@ class Job(Base):
     finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     # Renewed by the worker that runs the job; a stale heartbeat means the worker is gone.
     heartbeat_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    # Set when what the job is about ends (a terminate): the job stops at its next step.
+    cancel_reason: Mapped[str | None] = mapped_column(Text)
     updated_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow, onupdate=utcnow)
 
     created_by: Mapped[User | None] = relationship()

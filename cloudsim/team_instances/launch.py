@@ -242,6 +242,7 @@ def launch_through_instance(ctx: JobContext, payload: LaunchJob) -> None:
         "seen_at": _now(),
     }
     ctx.log(f"{instance.name} launches its constellation {remote['name']} (id {remote['id']})")
+    ctx.checkpoint()  # not when the instance was terminated meanwhile: it is cancelled then
 
 
 def _now() -> str:

@@ -9,6 +9,7 @@ from cloudsim.audit.service import record
 from cloudsim.auth.policy import Actor, require_role
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
+from cloudsim.jobs.control import cancel_jobs
 from cloudsim.launched_constellations import service as constellations
 from cloudsim.models import AuditEvent, InstanceState, Job, Role, Team, TeamInstance
 from cloudsim.models.lookup import by_id_or_name
@@ -130,6 +131,9 @@ def terminate(actor: Actor, ref: int | str) -> Job:
     if instance.state == InstanceState.TERMINATED:
         raise Conflict(f"{instance.name} is already terminated")
     job = constellations.terminate(actor, instance.constellation_id)
+    # a launch through the instance stops at its next step (the constellation's own jobs
+    # were told by the terminate above)
+    cancel_jobs("team_instance", instance.id, f"{instance.name} is being terminated")
     lifecycle.terminated(instance)
     record(
         "team_instance.terminate",

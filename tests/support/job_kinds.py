@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from dataclasses import dataclass
@@ -11,6 +12,7 @@ from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
 from cloudsim.jobs.runner import JobContext, Payload, job_kind
 from cloudsim.models import Team
+from provisioners.remote.ssh import HostKeys, SSHExecutor, SSHTarget
 
 SECRET = "s3cr3t-cloud-key-AKIAEXAMPLE"
 
@@ -29,6 +31,45 @@ class HalfDone(Payload):
     """The team test.half_done adds before failing."""
 
     team: str
+
+
+@dataclass(frozen=True)
+class Remote(Payload):
+    """The command test.remote runs on a host, and how to reach the host."""
+
+    host: str
+    proxy_command: str  # JSON list (a payload holds plain values)
+    key_file: str
+    command: str
+    timeout: float = 600.0
+
+
+@dataclass(frozen=True)
+class Stuck(Payload):
+    """How long test.stuck sits in code that never reaches a remote step."""
+
+    seconds: float = 3600.0
+
+
+@job_kind("test.remote", payload=Remote)
+def remote_job(ctx: JobContext, job: Remote) -> None:
+    """Run one command on a host over SSH, as provisioning steps do."""
+    target = SSHTarget(
+        name="host",
+        host=job.host,
+        private_key=Path(job.key_file).read_text(),
+        proxy_command=json.loads(job.proxy_command),
+    )
+    ctx.stage("running the command", 10)
+    with SSHExecutor(HostKeys(), log_sink=ctx.line_sink(), interrupt=ctx.interrupted) as ssh:
+        ssh.run(target, job.command, timeout=job.timeout)
+
+
+@job_kind("test.stuck", payload=Stuck)
+def stuck_job(ctx: JobContext, job: Stuck) -> None:
+    """Report once, then hang where no step checks (the watchdog must end the process)."""
+    ctx.stage("stuck", 10)
+    time.sleep(job.seconds)
 
 
 @job_kind("test.fail")

@@ -35,6 +35,7 @@ def worker_process(
         CLOUDSIM_ENCRYPTION_KEYS=",".join(config.encryption_keys),
         CLOUDSIM_SECRET_KEY=config.secret_key,
         CLOUDSIM_JOB_LEASE_SECONDS=str(config.job_lease_seconds),
+        CLOUDSIM_JOB_STALL_SECONDS=str(config.job_stall_seconds),
         CLOUDSIM_LOCAL_PREFIX=config.local_prefix,
         CLOUDSIM_LOCAL_SUBNET_POOL=config.local_subnet_pool,
         CLOUDSIM_LOCAL_PUBLIC_CIDR=config.local_public_cidr,

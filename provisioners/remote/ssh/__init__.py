@@ -8,6 +8,7 @@ from provisioners.remote.ssh.errors import (
     ConnectError,
     GroupError,
     HostKeyMismatch,
+    Interrupted,
     SSHError,
 )
 from provisioners.remote.ssh.executor import SSHExecutor
@@ -28,6 +29,7 @@ __all__ = [
     "HostKeyMismatch",
     "HostKeyStore",
     "HostKeys",
+    "Interrupted",
     "LogSink",
     "Route",
     "SSHError",

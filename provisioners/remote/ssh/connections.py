@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import fabric
 import paramiko
 
-from provisioners.remote.ssh.errors import ConnectError
+from provisioners.remote.ssh.errors import ConnectError, Interrupted
 from provisioners.remote.ssh.hostkeys import HostKeyStore, TrustOnFirstUse
 from provisioners.remote.ssh.proxy import ArgvProxyCommand
 from provisioners.remote.ssh.target import SSHTarget, load_private_key
@@ -22,6 +22,8 @@ if TYPE_CHECKING:
 
 # how long to wait for paramiko's reader thread to stop after a connection is closed
 _READER_STOP_SECONDS = 5.0
+# the caller's "must I stop?": None to go on, else why it stops (a cancelled job, say)
+Interrupt = Callable[[], str | None]
 # what a machine that is still booting (or a proxy/jump path not yet ready) looks like
 _RETRYABLE = (OSError, EOFError, paramiko.SSHException)
 
@@ -53,7 +55,9 @@ class ConnectionPool:
         policy: ConnectPolicy,
         log: Callable[[str, str], None],
         shared: ConnectionCache | None = None,
+        interrupt: Interrupt | None = None,
     ) -> None:
+        self._interrupt = interrupt or (lambda: None)
         self._host_keys = host_keys
         self._policy = policy
         self._log = log
@@ -122,6 +126,7 @@ class ConnectionPool:
         attempt = 0
         while True:
             attempt += 1
+            self.check(machine)
             try:
                 connection = self._connect_once(machine)
             except _RETRYABLE as exc:
@@ -139,6 +144,12 @@ class ConnectionPool:
             if attempt > 1:
                 self._log(machine.name, f"connected on attempt {attempt}")
             return connection
+
+    def check(self, machine: SSHTarget) -> None:
+        """Raise Interrupted when the caller said stop."""
+        reason = self._interrupt()
+        if reason is not None:
+            raise Interrupted(f"{machine.name}: stopped: {reason}")
 
     def _connect_once(self, machine: SSHTarget) -> fabric.Connection:
         sock = self._open_path(machine)

@@ -13,6 +13,10 @@ class SSHError(Exception):
     """Root of every error raised while reaching or provisioning a machine."""
 
 
+class Interrupted(SSHError):
+    """Raise when the caller said stop (its job was cancelled or stalled) between two steps."""
+
+
 class ConnectError(SSHError):
     """Raise when a machine cannot be reached or authenticated within the deadline."""
 

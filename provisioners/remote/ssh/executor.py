@@ -18,7 +18,7 @@ import fabric
 import paramiko
 
 from provisioners.remote.ssh.cache import ConnectionCache
-from provisioners.remote.ssh.connections import ConnectionPool, ConnectPolicy
+from provisioners.remote.ssh.connections import ConnectionPool, ConnectPolicy, Interrupt
 from provisioners.remote.ssh.errors import CommandFailed, CommandTimeout, GroupError, SSHError
 from provisioners.remote.ssh.hostkeys import HostKeyStore
 from provisioners.remote.ssh.output import LineStream, LogSink, SecretMasker
@@ -35,6 +35,8 @@ _KILL_AFTER_SECONDS = 5
 _TIMEOUT_EXIT_CODES = frozenset({124, 137})
 # extra wait on our side for a machine that stopped answering altogether
 _CLIENT_GRACE_SECONDS = _KILL_AFTER_SECONDS + 5
+# how often a running command checks whether its caller said stop
+_INTERRUPT_POLL_SECONDS = 1.0
 
 
 def _no_log(machine_name: str, line: str) -> None:
@@ -54,6 +56,7 @@ class SSHExecutor:
         default_timeout: float = 600.0,
         max_parallel: int = 16,
         connections: ConnectionCache | None = None,
+        interrupt: Interrupt | None = None,
     ) -> None:
         self._sink = log_sink or _no_log
         self._mask = SecretMasker(secrets)
@@ -63,7 +66,11 @@ class SSHExecutor:
         # the pinned host keys, also for transports that do not go through paramiko
         self.host_keys = host_keys
         # with `connections`, connections come from (and stay in) that cache after close()
-        self._pool = ConnectionPool(host_keys, self._policy, self.log, shared=connections)
+        # asked before every step and every second while a command runs: a job that must stop
+        # (cancelled, or stuck) stops within a second, whatever the command's own timeout
+        self._pool = ConnectionPool(
+            host_keys, self._policy, self.log, shared=connections, interrupt=interrupt
+        )
 
     def add_secret(self, secret: str) -> None:
         """Mask one more secret in everything logged from now on."""
@@ -86,6 +93,7 @@ class SSHExecutor:
         timeout = self._default_timeout if timeout is None else timeout
         if timeout <= 0:
             raise ValueError("timeout must be positive")
+        self._pool.check(machine)
         self.log(machine.name, f"$ {'sudo ' if sudo else ''}{command}")
         # the remote `timeout` kills the whole process group, so nothing outlives a timeout
         remote = (
@@ -116,6 +124,7 @@ class SSHExecutor:
         remote = PurePosixPath(remote_path)
         partial = str(remote.with_name(f".{remote.name}.{token_source.token_hex(6)}.part"))
         label = f"{len(source)} bytes" if isinstance(source, bytes) else str(source)
+        self._pool.check(machine)
         self.log(machine.name, f"put {label} -> {remote_path} (mode {mode:04o})")
         digest, size = hashlib.sha256(), 0
         connection = self._pool.get(machine)
@@ -139,6 +148,7 @@ class SSHExecutor:
         """Download a remote file over SFTP in chunks, replacing local_path when complete."""
         local = Path(local_path)
         partial = local.with_name(f".{local.name}.{token_source.token_hex(6)}.part")
+        self._pool.check(machine)
         self.log(machine.name, f"get {remote_path} -> {local}")
         digest, size = hashlib.sha256(), 0
         connection = self._pool.get(machine)
@@ -237,7 +247,9 @@ class SSHExecutor:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise CommandTimeout(machine.name, self._mask(command), timeout)
-            select.select([channel], [], [], remaining)
+            # stopping leaves the remote command to its `timeout`, which ends it at the deadline
+            self._pool.check(machine)
+            select.select([channel], [], [], min(remaining, _INTERRUPT_POLL_SECONDS))
             while channel.recv_ready():
                 stdout.feed(channel.recv(_CHUNK))
             while channel.recv_stderr_ready():
