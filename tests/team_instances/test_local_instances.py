@@ -37,11 +37,14 @@ from cloudsim.models import (
     Job,
     JobState,
     Role,
+    Run,
+    Task,
     Team,
     TeamInstance,
     User,
 )
 from cloudsim.people.service import create_team, update_user
+from cloudsim.portal.credentials import upload_token
 from cloudsim.providers.service import open_provider
 from cloudsim.team_instances.client import CallRefused, call
 from cloudsim.team_instances.poll import CATCH_UP_EVERY, catch_up, check_instances, endpoint_of
@@ -50,6 +53,7 @@ from cloudsim.worlds.service import update_world
 from tests.competition.support import open_task
 from tests.conftest import PASSWORD, csrf_token, log_in, make_user, token_for
 from tests.launched_constellations.conftest import finished, leftovers
+from tests.portal.test_forged_runs import honest_record
 from tests.support.servers import wait_for
 from tests.team_instances.test_sync import KEY
 from tests.web.test_browser import CHROMIUM, CHROMIUM_ARGS
@@ -248,6 +252,7 @@ def _propagation(
     assert on_instance(on_a, config, f"/users/{theirs['id']}")["role"] == "user"
     assert on_a.last_sync_at is not None and on_a.sync_error is None
     _seized(config, on_a, member_a, theirs["id"])
+    _forged_run_refused(on_a, task_a)
 
     # A cut between the master and A (here: A's certificate no longer matches the pin): the
     # sync jobs for A fail and A's page says why it is behind; B still gets every change;
@@ -325,6 +330,28 @@ class _Beat:
 def _active_on(config: Config, instance: TeamInstance, email: str) -> bool:
     users = on_instance(instance, config, "/users?page_size=500")
     return bool(next(u for u in users if u["email"] == email)["active"])
+
+
+def _forged_run_refused(instance: TeamInstance, task: Task) -> None:
+    """The report's forged result, sent with the upload token the master handed the deployed
+    instance: score 9 on a world of 4 checkpoints is refused with the reason, nothing stored."""
+    record = honest_record({"id": task.id, "name": task.name})
+    record.update(
+        team=task.team.name,
+        world=task.world,
+        run_config=task.run_config,
+        timeout_s=task.timeout_s,
+        uplink_bits=task.uplink_bits,
+        downlink_bits=task.downlink_bits,
+        score=9,
+    )
+    headers = {"Authorization": f"Bearer {upload_token(instance)}"}
+    sent = current_app.test_client().put(
+        "/api/v1/portal/ingest/runs/1", json=record, headers=headers
+    )
+    assert sent.status_code == 400, sent.json
+    assert "score 9 on a world of 4 checkpoints" in sent.json["message"]
+    assert db.session.scalar(select(Run).where(Run.instance_id == instance.id)) is None
 
 
 def _seized(config: Config, on_a: TeamInstance, member: User, member_id: int) -> None:
