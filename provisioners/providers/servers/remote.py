@@ -172,15 +172,11 @@ def prepare_script(
 
 
 def cleanup_script(server: Server, public_keys: Sequence[str], rules: Mapping[str, str]) -> str:
-    """Return the script that removes CloudSim's keys, services, chains and files.
-
-    It then restores the server's saved files, default route, firewall and kernel
-    parameters and gives the server back its own name. rules: `iptables -S` per table.
+    """Return the script that removes CloudSim's services, chains and files, restores the
+    server's saved files, default route, firewall and kernel parameters, gives the server back
+    its own name and, last, removes CloudSim's keys. rules: `iptables -S` per table.
     """
     script = _FIND_KEYS.format(user=shlex.quote(server.user))
-    blobs = _removable_blobs(server, public_keys)
-    if blobs:
-        script += _REMOVE_KEYS.format(blobs=shlex.quote(" ".join(blobs)))
     script += _STOP_SERVICES.format(units=shlex.join(SERVICES))
     for table, listing in rules.items():
         script += "".join(f"{command}\n" for command in iptables_cleanup(table, listing))
@@ -191,7 +187,13 @@ def cleanup_script(server: Server, public_keys: Sequence[str], rules: Mapping[st
         work_dir=shlex.quote(WORK_DIR),
         tables=shlex.join(IPTABLES_TABLES),
     )
-    return script + _SET_HOSTNAME.format(hostname=shlex.quote(server.name))
+    script += _SET_HOSTNAME.format(hostname=shlex.quote(server.name))
+    # The keys go last: a step that fails stops the script (set -e) with CloudSim's key still
+    # there, so the retry of a terminate_incomplete logs in again and cleans what is left.
+    blobs = _removable_blobs(server, public_keys)
+    if blobs:
+        script += _REMOVE_KEYS.format(blobs=shlex.quote(" ".join(blobs)))
+    return script
 
 
 def list_rules_script() -> str:

@@ -289,6 +289,8 @@ def test_scripts_never_touch_the_login_key() -> None:
     cleanup = remote.cleanup_script(server, [LOGIN.public_line, other.public_line], {})
     assert LOGIN.blob not in cleanup and other.blob in cleanup
     assert "hostname box1\n" in cleanup
+    # the key goes last: a failed step leaves it, so the terminate's retry can log in again
+    assert cleanup.index(other.blob) > cleanup.index("hostname box1\n") > cleanup.index("rm -rf")
 
 
 def test_a_claim_reads_pending_only_while_its_preparing_process_lives() -> None:
