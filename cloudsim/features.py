@@ -29,6 +29,7 @@ FEATURES = (
     "cloudsim.team_instances",
     "cloudsim.portal",
     "cloudsim.worlds",
+    "cloudsim.notifications",
 )
 
 

@@ -5,6 +5,7 @@ from cloudsim.models.base import Base, utcnow
 from cloudsim.models.competition import Artifact, Run, RunState, ScoreEvent, Task
 from cloudsim.models.jobs import Job, JobState
 from cloudsim.models.machines import Constellation, ConstellationState, Machine, MachineState
+from cloudsim.models.notifications import EmailOptOut, RunNotice, Webhook, WebhookDelivery
 from cloudsim.models.people import ApiToken, LoginSession, Role, SshKey, Team, User
 from cloudsim.models.portal import PortalRefusal, PortalUpload, UploadState
 from cloudsim.models.secrets import Secret, SecretKind
@@ -18,6 +19,7 @@ __all__ = [
     "Base",
     "Constellation",
     "ConstellationState",
+    "EmailOptOut",
     "InstanceState",
     "Job",
     "JobState",
@@ -28,6 +30,7 @@ __all__ = [
     "PortalUpload",
     "Role",
     "Run",
+    "RunNotice",
     "RunState",
     "ScoreEvent",
     "Secret",
@@ -38,6 +41,8 @@ __all__ = [
     "TeamInstance",
     "UploadState",
     "User",
+    "Webhook",
+    "WebhookDelivery",
     "World",
     "utcnow",
 ]
