@@ -5,7 +5,6 @@ from __future__ import annotations
 import click
 
 from cloudsim.cli import app_context, reports_errors
-from cloudsim.extensions import db
 
 
 @click.group()
@@ -21,5 +20,4 @@ def resend() -> None:
 
     with app_context():
         queued = resend_pending()
-        db.session.commit()
     click.echo(f"{queued} queued")

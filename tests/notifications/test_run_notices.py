@@ -9,7 +9,7 @@ import json
 import socket
 import threading
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from email import message_from_bytes
 from email.message import Message
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -22,11 +22,13 @@ from flask import Flask
 from flask.testing import FlaskClient
 from sqlalchemy import select
 
+from cloudsim.auth.policy import SYSTEM
 from cloudsim.competition import lifecycle
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.models import Job, Role, Run, RunNotice, RunState, Team, User, WebhookDelivery
-from cloudsim.notifications.service import notify_run_event, run_ended_event
+from cloudsim.notifications.delivery import resend_pending
+from cloudsim.notifications.service import UNSENT, add_webhook, notify_run_event, run_ended_event
 from tests.competition.support import open_task
 from tests.conftest import csrf_token, log_in, make_user, running_app, token_for
 from tests.support.servers import wait_for
@@ -272,3 +274,47 @@ def test_the_stop_job_tells_of_a_failed_run_once(
     assert "constellation no longer exists" in str(failed.get_payload())
     notices = db.session.scalars(select(RunNotice.event).where(RunNotice.run_id == run.id))
     assert sorted(notices) == ["failed", "started"]
+
+
+def test_a_dead_smtp_server_never_fails_the_run_and_its_tries_are_recorded(
+    app: Flask, team_a: Team, worker: None
+) -> None:
+    make_user(Role.USER, team_a)
+    config: Config = app.config["CLOUDSIM"]
+    app.config["CLOUDSIM"] = replace(config, smtp_port=free_port())  # nothing listens there
+    run = running_run(team_a)
+    end(run)
+    db.session.expire_all()
+    assert db.session.get(Run, run.id).state == RunState.FINISHED  # type: ignore[union-attr]
+
+    def tried_twice() -> RunNotice | None:
+        db.session.expire_all()
+        notice = db.session.scalar(
+            select(RunNotice).where(RunNotice.run_id == run.id, RunNotice.event == "ended")
+        )
+        return notice if notice is not None and notice.mail_attempts >= 2 else None
+
+    notice = wait_for(tried_twice, 30, "two failed e-mail tries recorded")
+    assert isinstance(notice, RunNotice)
+    assert notice.mailed_at is None and notice.mailed == []
+    assert "ConnectionRefusedError" in (notice.mail_error or "")
+
+
+def test_a_notice_the_queue_missed_is_sent_by_resend(
+    app: Flask, team_a: Team, mailbox: Mailbox, hook: Hook, worker: None
+) -> None:
+    member = make_user(Role.USER, team_a)
+    add_webhook(SYSTEM, hook.url, SECRET)
+    task = open_task(team_a.id)
+    run = lifecycle.new_run(task_id=task.id, team_id=team_a.id)
+    db.session.add(run)
+    db.session.flush()
+    lifecycle.running(run)
+    notify_run_event(run, "started")
+    db.session.info.pop(UNSENT)  # as if the queue was down when the run job committed
+    db.session.commit()
+    assert mailbox.mails == [] and hook.received == []
+    assert resend_pending() == 2  # its e-mails and its one delivery
+    db.session.commit()
+    wait_for(lambda: len(mailbox.to(member.email)) == 1, 30, "the resent e-mail")
+    wait_for(lambda: len(hook.received) == 1, 30, "the resent event")
