@@ -16,10 +16,14 @@ import smtplib
 import ssl
 import urllib.error
 import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
+import redis
 from celery import shared_task
 from flask import current_app
+from redis.exceptions import LockError
 from sqlalchemy import select
 
 from cloudsim.config import Config
@@ -33,11 +37,32 @@ MAIL_TASK = "cloudsim.notifications.mail"
 HOOK_TASK = "cloudsim.notifications.webhook"
 SIGNATURE_HEADER = "X-CloudSim-Signature"
 TIMEOUT = 10.0  # seconds for one SMTP conversation step or one webhook answer
+LOCK_SECONDS = 300  # longer than one try can take (a few SMTP steps or one POST)
 MAX_WAIT = 3600.0
 
 
 def _config() -> Config:
     return current_app.config["CLOUDSIM"]  # type: ignore[no-any-return]
+
+
+@contextmanager
+def _alone(config: Config, name: str) -> Iterator[bool]:
+    """Hold a Redis lock for one notice or delivery; yield whether this task got it.
+
+    A resend and a retry of the same task may run at once: only one of them sends.
+    """
+    lock = redis.Redis.from_url(config.effective_redis_url).lock(
+        f"cloudsim:notify:{name}", timeout=LOCK_SECONDS
+    )
+    got = lock.acquire(blocking=False)
+    try:
+        yield got
+    finally:
+        if got:
+            try:
+                lock.release()
+            except LockError:  # it expired: the other task may already hold it
+                pass
 
 
 def _wait(config: Config, attempts: int) -> float:
@@ -96,6 +121,11 @@ def _smtp(config: Config) -> smtplib.SMTP:
 def mail_run_notice(self: Any, notice_id: int) -> int:
     """E-mail a notice to each of its people not mailed yet; return how many were mailed."""
     config = _config()
+    with _alone(config, f"mail:{notice_id}") as alone:
+        return _mail(self, config, notice_id) if alone else 0
+
+
+def _mail(task: Any, config: Config, notice_id: int) -> int:
     notice = db.session.get(RunNotice, notice_id)
     if notice is None or notice.mailed_at is not None:
         return 0
@@ -132,7 +162,7 @@ def mail_run_notice(self: Any, notice_id: int) -> int:
         )
         if attempts >= config.notify_attempts:
             return sent
-        raise self.retry(countdown=_wait(config, attempts)) from None
+        raise task.retry(countdown=_wait(config, attempts)) from None
 
 
 def _post(url: str, body: bytes, headers: dict[str, str]) -> tuple[int | None, str | None]:
@@ -151,6 +181,11 @@ def _post(url: str, body: bytes, headers: dict[str, str]) -> tuple[int | None, s
 def deliver_webhook(self: Any, delivery_id: int) -> bool:
     """POST a notice's signed event to one webhook; return whether it was accepted."""
     config = _config()
+    with _alone(config, f"hook:{delivery_id}") as alone:
+        return _deliver(self, config, delivery_id) if alone else False
+
+
+def _deliver(task: Any, config: Config, delivery_id: int) -> bool:
     delivery = db.session.get(WebhookDelivery, delivery_id)
     if delivery is None or delivery.delivered_at is not None:
         return delivery is not None
@@ -186,4 +221,4 @@ def deliver_webhook(self: Any, delivery_id: int) -> bool:
     db.session.commit()  # the try is recorded before the retry is scheduled
     if attempts >= config.notify_attempts:
         return False
-    raise self.retry(countdown=_wait(config, attempts))
+    raise task.retry(countdown=_wait(config, attempts))
