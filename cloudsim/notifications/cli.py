@@ -9,7 +9,7 @@ from cloudsim.cli import app_context, reports_errors
 
 @click.group()
 def notify() -> None:
-    """Run notifications."""
+    """Run notifications: send again what the queue missed."""
 
 
 @notify.command("resend")
