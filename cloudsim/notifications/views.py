@@ -6,6 +6,7 @@ from flask import Blueprint, abort, flash, redirect, render_template, url_for
 from flask.typing import ResponseReturnValue
 from flask_login import current_user, login_required
 
+from cloudsim.audit.service import record
 from cloudsim.auth.forms import ConfirmForm
 from cloudsim.auth.policy import role_required
 from cloudsim.errors import CloudSimError
@@ -54,6 +55,7 @@ def add_webhook() -> ResponseReturnValue:
         db.session.rollback()
         form.url.errors = [str(exc)]
         return _page(form, exc.status)
+    record("webhook.add", current_user, target_type="webhook", target_id=hook.id)
     flash(f"Webhook {hook.url} added.", "info")
     # shown once, on this answer only, when it was generated (never stored in a session)
     return _page(WebhookForm(formdata=None), 200, None if form.secret.data else secret)
@@ -65,6 +67,7 @@ def remove_webhook(webhook_id: int) -> ResponseReturnValue:
     if not ConfirmForm().validate_on_submit():
         return _page(WebhookForm(), 400)
     service.remove_webhook(current_user, webhook_id)
+    record("webhook.remove", current_user, target_type="webhook", target_id=webhook_id)
     flash("Webhook removed.", "info")
     return redirect(url_for("notifications.webhooks"))
 

@@ -253,6 +253,19 @@ def test_a_failing_webhook_is_retried_and_both_tries_are_listed(
     page = client.get("/admin/webhooks").get_data(as_text=True)
     assert "run.started" in page and "200 delivered" in page
     assert ": 500</li>" in page and ": 200</li>" in page  # each try on the list
+    # removed through its page, the webhook gets nothing more; its deliveries stay listed
+    hook_id = delivery.webhook_id
+    removed = client.post(
+        f"/admin/webhooks/{hook_id}/delete", data={"csrf_token": csrf_token(page)}
+    )
+    assert removed.status_code == 302
+    page = client.get("/admin/webhooks").get_data(as_text=True)
+    assert "No webhooks." in page and ": 500</li>" in page
+    end(run)
+    events = db.session.scalars(
+        select(WebhookDelivery.event).where(WebhookDelivery.run_id == run.id)
+    )
+    assert list(events) == ["started"]
 
 
 def test_the_stop_job_tells_of_a_failed_run_once(
