@@ -110,10 +110,14 @@ def _masked(text: str, config: Config) -> str:
 
 def _smtp(config: Config) -> smtplib.SMTP:
     server = smtplib.SMTP(config.smtp_host, config.smtp_port, timeout=TIMEOUT)
-    if config.smtp_starttls:
-        server.starttls(context=ssl.create_default_context())
-    if config.smtp_username:
-        server.login(config.smtp_username, config.smtp_password)
+    try:
+        if config.smtp_starttls:
+            server.starttls(context=ssl.create_default_context())
+        if config.smtp_username:
+            server.login(config.smtp_username, config.smtp_password)
+    except BaseException:
+        server.close()  # a refused upgrade or login leaves no connection open
+        raise
     return server
 
 
