@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 from aiosmtpd.controller import Controller
+from aiosmtpd.smtp import AuthResult, LoginPassword
 from celery.contrib.testing.worker import start_worker
 from flask import Flask
 from flask.testing import FlaskClient
@@ -331,3 +332,46 @@ def test_a_notice_the_queue_missed_is_sent_by_resend(
     db.session.commit()
     wait_for(lambda: len(mailbox.to(member.email)) == 1, 30, "the resent e-mail")
     wait_for(lambda: len(hook.received) == 1, 30, "the resent event")
+
+
+def test_the_smtp_login_is_used_and_never_logged(
+    app: Flask, team_a: Team, worker: None, caplog: pytest.LogCaptureFixture
+) -> None:
+    member = make_user(Role.USER, team_a)
+    password = "smtp-password-never-logged"
+    logins: list[tuple[bytes, bool]] = []
+
+    def authenticator(
+        server: Any, session: Any, envelope: Any, mechanism: str, data: Any
+    ) -> AuthResult:
+        ok = isinstance(data, LoginPassword) and data.password == password.encode()
+        logins.append((data.login, ok))
+        return AuthResult(success=ok)
+
+    box = Mailbox(free_port())
+    controller = Controller(
+        box,
+        hostname="127.0.0.1",
+        port=box.port,
+        authenticator=authenticator,
+        auth_require_tls=False,  # loopback only; production sets CLOUDSIM_SMTP_STARTTLS
+    )
+    controller.start()
+    try:
+        config: Config = app.config["CLOUDSIM"]
+        app.config["CLOUDSIM"] = replace(
+            config, smtp_port=box.port, smtp_username="cloudsim", smtp_password="wrong-password"
+        )
+        caplog.set_level("DEBUG")
+        run = running_run(team_a)
+        wait_for(lambda: logins, 30, "a refused login")
+        assert logins[0] == (b"cloudsim", False) and box.mails == []
+        app.config["CLOUDSIM"] = replace(
+            config, smtp_port=box.port, smtp_username="cloudsim", smtp_password=password
+        )
+        wait_for(lambda: box.to(member.email), 30, "the e-mail after a good login (a retry)")
+        assert logins[-1] == (b"cloudsim", True)
+        assert notify_run_event(run, "started") is None
+        assert "wrong-password" not in caplog.text and password not in caplog.text
+    finally:
+        controller.stop()
