@@ -34,6 +34,7 @@ from tests.competition.support import open_task
 from tests.conftest import csrf_token, log_in, make_user, running_app, token_for
 from tests.support.servers import wait_for
 from tests.support.workers import job_finished
+from tests.web.test_query_counts import counting
 
 SECRET = "a-webhook-secret-of-some-length"
 
@@ -375,3 +376,28 @@ def test_the_smtp_login_is_used_and_never_logged(
         assert "wrong-password" not in caplog.text and password not in caplog.text
     finally:
         controller.stop()
+
+
+def test_the_deliveries_page_and_list_make_as_many_queries_for_more_rows(
+    app: Flask, team_a: Team
+) -> None:
+    admin = make_user(Role.ADMIN)
+    add_webhook(SYSTEM, "https://hooks.example.org/a", SECRET)
+    client = app.test_client()
+    log_in(client, admin)
+    headers = token_for(admin)
+
+    def counts() -> tuple[int, int]:
+        db.session.commit()
+        with counting() as page:
+            assert client.get("/admin/webhooks").status_code == 200
+        with counting() as listed:
+            assert client.get("/api/v1/webhook-deliveries", headers=headers).status_code == 200
+        return len(page), len(listed)
+
+    notify_run_event(running_run(team_a), "ended")
+    counts()  # the token's first use records itself once
+    few = counts()
+    for _ in range(3):
+        notify_run_event(running_run(team_a), "ended")
+    assert counts() == few
