@@ -237,6 +237,21 @@ SETTINGS: dict[str, Setting] = {
     "CLOUDSIM_VIEWER_MAX_LIVE": Setting(
         "8", "Live 3D viewers allowed per run at once (one more gets 503)"
     ),
+    "CLOUDSIM_SMTP_HOST": Setting("", "SMTP server for run e-mails; empty: no e-mails are sent"),
+    "CLOUDSIM_SMTP_PORT": Setting("25", "Port of the SMTP server"),
+    "CLOUDSIM_SMTP_SENDER": Setting("cloudsim@localhost", "From: address of run e-mails"),
+    "CLOUDSIM_SMTP_STARTTLS": Setting("false", "Upgrade the SMTP connection with STARTTLS"),
+    "CLOUDSIM_SMTP_USERNAME": Setting("", "SMTP login; empty: no login"),
+    "CLOUDSIM_SMTP_PASSWORD": Setting("", "SMTP password (never logged)"),
+    "CLOUDSIM_PUBLIC_URL": Setting(
+        "", "This CloudSim's address (https://HOST/) for links in e-mails and webhook events"
+    ),
+    "CLOUDSIM_NOTIFY_ATTEMPTS": Setting(
+        "6", "Tries of one e-mail batch or webhook delivery before it is given up"
+    ),
+    "CLOUDSIM_NOTIFY_RETRY_SECONDS": Setting(
+        "30", "First wait before a failed e-mail or webhook delivery is retried; doubles each time"
+    ),
 }
 
 
@@ -309,6 +324,15 @@ class Config:
     viewer_live_delay_ms: int
     viewer_poll_ms: int
     viewer_max_live: int
+    smtp_host: str
+    smtp_port: int
+    smtp_sender: str
+    smtp_starttls: bool
+    smtp_username: str
+    smtp_password: str = field(repr=False)
+    public_url: str
+    notify_attempts: int
+    notify_retry_seconds: float
     testing: bool = False
 
     def __repr__(self) -> str:
@@ -323,6 +347,7 @@ class Config:
                 "admin_token",
                 "artifact_secret",
                 "metrics_token",
+                "smtp_password",
             }
         )
         return f"Config({shown})"
@@ -457,9 +482,26 @@ class Config:
             viewer_live_delay_ms=number("CLOUDSIM_VIEWER_LIVE_DELAY_MS"),
             viewer_poll_ms=number("CLOUDSIM_VIEWER_POLL_MS"),
             viewer_max_live=number("CLOUDSIM_VIEWER_MAX_LIVE"),
+            smtp_host=get("CLOUDSIM_SMTP_HOST"),
+            smtp_port=positive("CLOUDSIM_SMTP_PORT"),
+            smtp_sender=get("CLOUDSIM_SMTP_SENDER"),
+            smtp_starttls=_flag("CLOUDSIM_SMTP_STARTTLS", get),
+            smtp_username=get("CLOUDSIM_SMTP_USERNAME"),
+            smtp_password=get("CLOUDSIM_SMTP_PASSWORD"),
+            public_url=get("CLOUDSIM_PUBLIC_URL").rstrip("/"),
+            notify_attempts=positive("CLOUDSIM_NOTIFY_ATTEMPTS"),
+            notify_retry_seconds=positive("CLOUDSIM_NOTIFY_RETRY_SECONDS"),
         )
         values.update(overrides)
         return cls(**values)  # type: ignore[arg-type]
+
+
+def _flag(name: str, get: Callable[[str], str]) -> bool:
+    """Return a yes/no setting, or a clear error naming it."""
+    try:
+        return _bool(get(name))
+    except ValueError as exc:
+        raise ConfigError(f"{name}: {exc}") from None
 
 
 def _portal_url(value: str) -> str:
@@ -504,13 +546,6 @@ def _choice(name: str, get: Callable[[str], str], choices: tuple[str, ...]) -> s
     if value not in choices:
         raise ConfigError(f"{name} must be one of {', '.join(choices)}, got {value!r}")
     return value
-
-
-def _flag(name: str, get: Callable[[str], str]) -> bool:
-    try:
-        return _bool(get(name))
-    except ValueError as exc:
-        raise ConfigError(f"{name}: {exc}") from None
 
 
 def _instance_secret(path: Path, generate: object) -> str:

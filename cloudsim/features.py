@@ -31,6 +31,7 @@ FEATURES = (
     "cloudsim.verification",
     "cloudsim.worlds",
     "cloudsim.monitoring",
+    "cloudsim.notifications",
 )
 
 

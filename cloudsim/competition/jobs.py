@@ -35,6 +35,7 @@ from cloudsim.launched_constellations import router_control
 from cloudsim.launched_constellations.connect import machine_host_keys, targets
 from cloudsim.launched_constellations.keys import constellation_keypair
 from cloudsim.models import Run, RunState, ScoreEvent, utcnow
+from cloudsim.notifications.service import notify_run_event, run_ended_event
 from cloudsim.worlds.service import world_for_run
 from provisioners.remote.ssh import ConnectPolicy, HostKeys, SSHError, SSHExecutor, SSHTarget
 
@@ -223,6 +224,7 @@ def start_run_job(ctx: JobContext, job: RunJob) -> None:
         ctx.checkpoint()  # the stopping state and the stop job survive this job's failure
         raise RunError(run.error) from exc
     lifecycle.running(run)
+    notify_run_event(run, "started")  # sent by its own tasks once this job commits
     ctx.stage("running", 100)
     lifecycle.stop_requested_while_starting(run)
 
@@ -280,6 +282,7 @@ def stop_run_job(ctx: JobContext, job: RunJob) -> None:
         ctx.log(f"run {run.id} needs review: {run.error}")
         return
     lifecycle.ended(run, error, failed=bool(problems))
+    notify_run_event(run, run_ended_event(run))  # sent by its own tasks once this job commits
     ctx.log(f"run {run.id} {run.state.value}: {run.score} checkpoint(s), ended by {run.end_reason}")
 
 

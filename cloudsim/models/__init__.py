@@ -12,6 +12,7 @@ from cloudsim.models.competition import (
 )
 from cloudsim.models.jobs import Job, JobState
 from cloudsim.models.machines import Constellation, ConstellationState, Machine, MachineState
+from cloudsim.models.notifications import EmailOptOut, RunNotice, Webhook, WebhookDelivery
 from cloudsim.models.people import ApiToken, LoginSession, Role, SshKey, Team, User
 from cloudsim.models.portal import PortalRefusal, PortalUpload, UploadState
 from cloudsim.models.secrets import Secret, SecretKind
@@ -25,6 +26,7 @@ __all__ = [
     "Base",
     "Constellation",
     "ConstellationState",
+    "EmailOptOut",
     "InstanceState",
     "Job",
     "JobState",
@@ -35,6 +37,7 @@ __all__ = [
     "PortalUpload",
     "Role",
     "Run",
+    "RunNotice",
     "RunState",
     "ScoreEvent",
     "Secret",
@@ -46,6 +49,8 @@ __all__ = [
     "UploadState",
     "User",
     "Verification",
+    "Webhook",
+    "WebhookDelivery",
     "World",
     "utcnow",
 ]

@@ -19,7 +19,7 @@ from cloudsim.auth.ssh_keys import generate_key
 from cloudsim.auth.tokens import issue_token
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
-from cloudsim.models import Constellation, ConstellationState, Role, Team, User
+from cloudsim.models import Constellation, ConstellationState, Role, Team, User, Webhook
 from cloudsim.team_instances import service as team_instances
 from tests.competition.support import finished_run, open_task, ready_constellation
 from tests.conftest import log_in, make_user, token_for
@@ -175,6 +175,15 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("api_team_instances.TeamInstanceById", "PATCH"): (401, 403, 403, 403, 200),
     ("api_team_instances.TeamInstanceById", "DELETE"): (401, 403, 403, 403, 202),
     ("api_team_instances.InstanceHealth", "GET"): (401, 403, 403, 403, 200),
+    # notifications: webhooks are admins'; anyone logged in chooses their own run e-mails
+    ("notifications.webhooks", "GET"): (LOGIN, 403, 403, 403, 200),
+    ("notifications.add_webhook", "POST"): (LOGIN, 403, 403, 403, 400),  # an empty form
+    ("notifications.remove_webhook", "POST"): (LOGIN, 403, 403, 403, 302),
+    ("notifications.run_emails", "POST"): (LOGIN, 302, 302, 302, 302),
+    ("api_notifications.Webhooks", "GET"): (401, 403, 403, 403, 200),
+    ("api_notifications.Webhooks", "POST"): (401, 403, 403, 403, 201),
+    ("api_notifications.WebhookById", "DELETE"): (401, 403, 403, 403, 204),
+    ("api_notifications.Deliveries", "GET"): (401, 403, 403, 403, 200),
     # this app has team instances by now (the entries above): a master takes no desired state
     ("api_team_instances.DesiredState", "PUT"): (401, 403, 403, 403, 409),
     ("worlds.index", "GET"): (LOGIN, 403, 403, 403, 200),
@@ -240,6 +249,10 @@ def _bodies(team_id: int) -> dict[tuple[str, str], Callable[[], dict[str, Any]]]
             "settings": {"inventory": INVENTORY},
         },
         ("api_team_instances.LaunchThrough", "POST"): lambda: {"kind": "simple"},
+        ("api_notifications.Webhooks", "POST"): lambda: {
+            "url": "https://hooks.example.org/cloudsim",
+            "secret": "a-matrix-secret-of-length",
+        },
         ("api_providers.ProviderSettings", "PUT"): lambda: {"settings": {"inventory": INVENTORY}},
         ("api_competition.Season", "POST"): lambda: {
             "yaml": "tasks: [{name: Matrix season, world: vrc_task_2, "
@@ -287,6 +300,11 @@ def _url(
         values["key_id"] = generate_key(user_a, "victim").key.id
     if "job_id" in rule.arguments:
         values["job_id"] = job_id
+    if "webhook_id" in rule.arguments:
+        hook = Webhook(url="https://hooks.example.org/victim", secret="a-victim-secret-16+")
+        db.session.add(hook)
+        db.session.commit()
+        values["webhook_id"] = hook.id
     if "instance_id" in rule.arguments:
         deployed = team_instances.deploy(SYSTEM, name=f"mx-{next(_seq)}", provider="local")
         values["instance_id"] = deployed[0][0].id
