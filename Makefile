@@ -11,7 +11,7 @@ run: install
 	$(BIN)/cloudsim up --demo
 
 test: install
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 --dist loadfile
 
 lint: install
 	$(BIN)/ruff check .

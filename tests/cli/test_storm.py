@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 import requests
-from sqlalchemy import create_engine, text
+from sqlalchemy import Engine, create_engine, text
 from sqlalchemy.exc import OperationalError
 
 from cloudsim.config import Config
@@ -187,7 +187,15 @@ class LockProbe:
         self._thread.join()
 
     def _run(self) -> None:
-        probe = self._sqlite if self.url.startswith("sqlite") else self._postgres()
+        engine = None if self.url.startswith("sqlite") else create_engine(self.url)
+        probe = self._sqlite if engine is None else self._postgres(engine)
+        try:
+            self._probe_until_stopped(probe)
+        finally:
+            if engine is not None:
+                engine.dispose()  # no connection left for the garbage collector to warn about
+
+    def _probe_until_stopped(self, probe: Callable[[float], None]) -> None:
         while not self.stop.wait(0.2):
             self.probes += 1
             try:
@@ -207,9 +215,7 @@ class LockProbe:
         finally:
             db.close()
 
-    def _postgres(self) -> Callable[[float], None]:
-        engine = create_engine(self.url)
-
+    def _postgres(self, engine: Engine) -> Callable[[float], None]:
         def probe(seconds: float) -> None:
             with engine.begin() as conn:
                 conn.execute(text(f"SET LOCAL lock_timeout = '{int(seconds * 1000)}ms'"))

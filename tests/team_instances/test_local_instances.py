@@ -9,6 +9,7 @@ import shlex
 import subprocess
 import time
 from collections.abc import Callable
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any, cast
 
@@ -42,6 +43,7 @@ from cloudsim.models import (
     Team,
     TeamInstance,
     User,
+    utcnow,
 )
 from cloudsim.people.service import create_team, update_user
 from cloudsim.portal.credentials import upload_token
@@ -336,6 +338,12 @@ def _forged_run_refused(instance: TeamInstance, task: Task) -> None:
     """The report's forged result, sent with the upload token the master handed the deployed
     instance: score 9 on a world of 4 checkpoints is refused with the reason, nothing stored."""
     record = honest_record({"id": task.id, "name": task.name})
+    # its run ended a second ago, well inside the task's window (opened minutes ago)
+    late = utcnow() - datetime.fromisoformat(record["finished_at"]) - timedelta(seconds=1)
+    for event in record["score_events"]:
+        event["wall_time"] = (datetime.fromisoformat(event["wall_time"]) + late).isoformat()
+    for field in ("started_at", "finished_at"):
+        record[field] = (datetime.fromisoformat(record[field]) + late).isoformat()
     record.update(
         team=task.team.name,
         world=task.world,
