@@ -337,8 +337,10 @@ def _active_on(config: Config, instance: TeamInstance, email: str) -> bool:
 def _forged_run_refused(instance: TeamInstance, task: Task) -> None:
     """The report's forged result, sent with the upload token the master handed the deployed
     instance: score 9 on a world of 4 checkpoints is refused with the reason, nothing stored."""
+    task.window_start = utcnow() - timedelta(hours=1)  # open long before the run below
+    db.session.commit()
     record = honest_record({"id": task.id, "name": task.name})
-    # its run ended a second ago, well inside the task's window (opened minutes ago)
+    # its run (75 s of wall clock) ended a second ago, inside the task's window
     late = utcnow() - datetime.fromisoformat(record["finished_at"]) - timedelta(seconds=1)
     for event in record["score_events"]:
         event["wall_time"] = (datetime.fromisoformat(event["wall_time"]) + late).isoformat()
