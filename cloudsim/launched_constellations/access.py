@@ -57,11 +57,6 @@ def refresh_turn(constellation_id: int) -> Iterator[None]:
             pass  # expired: whoever took it since keeps it
 
 
-def team_keys(team_id: int | None) -> tuple[str, ...]:
-    """Return the authorized_keys lines of the team's active members, each naming its owner."""
-    return tuple(key for member in team_members(team_id) for key in member.keys)
-
-
 def team_members(team_id: int | None) -> tuple[MemberAccount, ...]:
     """Return the account each active member of the team gets on its field computers."""
     if team_id is None:

@@ -17,12 +17,17 @@ from cloudsim.auth.policy import SYSTEM
 from cloudsim.auth.ssh_keys import parse_public_key
 from cloudsim.errors import InvalidInput
 from cloudsim.extensions import db
-from cloudsim.launched_constellations.access import team_keys
+from cloudsim.launched_constellations.access import team_members
 from cloudsim.launched_constellations.service import launch
 from cloudsim.models import Constellation, Job, Role, SshKey, User
 from cloudsim.people.service import update_user
 from tests.competition.support import ready_constellation
 from tests.conftest import csrf_token, log_in, make_user, token_for
+
+
+def pushed_keys(team_id: int | None) -> tuple[str, ...]:
+    """Return the keys the access refresh writes on the field computers, every member's."""
+    return tuple(key for member in team_members(team_id) for key in member.keys)
 
 
 def openssh(key: object, comment: str = "pat@laptop") -> str:
@@ -119,7 +124,7 @@ def test_the_account_form_adds_a_key_and_the_team_computers_get_it(
     page = client.get("/account").get_data(as_text=True)
     fingerprint = parse_public_key(line).fingerprint
     assert fingerprint in page and "laptop" in page
-    assert team_keys(user.team_id) == (f"{' '.join(line.split()[:2])} {user.email}",)
+    assert pushed_keys(user.team_id) == (f"{' '.join(line.split()[:2])} {user.email}",)
     assert _refreshes(constellation) == 1  # pushed to the field computers at once
     # a weak key: the reason on the form, nothing stored
     weak = openssh(rsa.generate_private_key(65537, 2048))
@@ -151,13 +156,13 @@ def test_a_generated_key_is_shown_once_kept_public_and_removed_from_the_page(
     assert "PRIVATE KEY" not in page
     [stored] = db.session.scalars(select(SshKey)).all()
     assert stored.key_type == "ssh-ed25519" and "PRIVATE" not in stored.public_key
-    assert len(team_keys(user.team_id)) == 1
+    assert len(pushed_keys(user.team_id)) == 1
     before = _refreshes(constellation)
     [action] = re.findall(r'<form class="inline" method="post" action="([^"]+/delete)"', page)
     response = client.post(action, data={"csrf_token": csrf_token(page)})
     assert response.status_code == 302
     assert "No SSH keys." in client.get("/account").get_data(as_text=True)
-    assert team_keys(user.team_id) == () and _refreshes(constellation) == before + 1
+    assert pushed_keys(user.team_id) == () and _refreshes(constellation) == before + 1
 
 
 def test_the_api_adds_lists_generates_and_deletes_own_keys_only(
@@ -199,11 +204,11 @@ def test_only_active_members_keys_reach_the_team_account(
     for member in (user, teammate):
         line = openssh(ed25519.Ed25519PrivateKey.generate())
         client.post("/api/v1/me/ssh-keys", json={"public_key": line}, headers=token_for(member))
-    assert len(team_keys(team_id)) == 2
+    assert len(pushed_keys(team_id)) == 2
     before = _refreshes(constellation)
     update_user(SYSTEM, teammate.id, active=False)  # one hook: VPN and SSH keys
     db.session.commit()
-    assert len(team_keys(team_id)) == 1 and _refreshes(constellation) == before + 1
+    assert len(pushed_keys(team_id)) == 1 and _refreshes(constellation) == before + 1
     update_user(SYSTEM, teammate.id, active=True)  # back: their key again
     db.session.commit()
-    assert len(team_keys(team_id)) == 2 and _refreshes(constellation) == before + 2
+    assert len(pushed_keys(team_id)) == 2 and _refreshes(constellation) == before + 2
