@@ -5,11 +5,7 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import re
-import signal
-import subprocess
-import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,7 +22,8 @@ from cloudsim.jobs.service import enqueue, run_here
 from cloudsim.models import Role
 from tests.conftest import PASSWORD, log_in, make_user, running_app, token_for
 from tests.monitoring.support import measurable_season
-from tests.support.servers import free_port, wait_for
+from tests.support.servers import wait_for
+from tests.support.up import cloudsim_up
 
 
 @dataclass(frozen=True)
@@ -125,33 +122,15 @@ def test_web_and_job_lines_are_json_with_their_ids_and_no_secret(
 def test_cloudsim_up_logs_json_from_web_worker_and_beat(
     tmp_path: Path, pytestconfig: pytest.Config
 ) -> None:
-    web = free_port()
     password = "the admin's password, never logged"
-    env = dict(
-        os.environ,
-        CLOUDSIM_INSTANCE_DIR=str(tmp_path / "instance"),
-        CLOUDSIM_BIND=f"127.0.0.1:{web}",
-        CLOUDSIM_REDIS_PORT=str(free_port()),
-        CLOUDSIM_WEB_WORKERS="1",
-        CLOUDSIM_WORKER_CONCURRENCY="1",
-        CLOUDSIM_ADMIN_EMAIL="root@example.org",
-        CLOUDSIM_ADMIN_PASSWORD=password,
-        CLOUDSIM_LOG_LEVEL="INFO",
-        CLOUDSIM_LOG_FORMAT="json",
-    )
-    env.pop("CLOUDSIM_REDIS_URL", None)
-    log = tmp_path / "up.log"
-    with log.open("wb") as out:
-        process = subprocess.Popen(
-            [sys.executable, "-m", "cloudsim.cli", "up"],
-            env=env,
-            cwd=pytestconfig.rootpath,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    try:
-        wait_for(lambda: "CloudSim is running at" in log.read_text(), 120, "cloudsim up")
-        base = f"http://127.0.0.1:{web}"
+    settings = {
+        "CLOUDSIM_WEB_WORKERS": "1",
+        "CLOUDSIM_ADMIN_PASSWORD": password,
+        "CLOUDSIM_LOG_LEVEL": "INFO",
+        "CLOUDSIM_LOG_FORMAT": "json",
+    }
+    with cloudsim_up(tmp_path, pytestconfig.rootpath, **settings) as up:
+        base = f"http://{up.address}"
         session = requests.Session()
         # the beat's heartbeat reached a worker and both were heard from (slow to start on a
         # busy 2-core machine)
@@ -160,10 +139,7 @@ def test_cloudsim_up_logs_json_from_web_worker_and_beat(
         csrf = re.search(r'name="csrf_token" type="hidden" value="([^"]+)"', page).group(1)  # type: ignore[union-attr]
         data = {"email": "root@example.org", "password": password, "csrf_token": csrf}
         assert session.post(f"{base}/login", data=data, timeout=60).url == f"{base}/"
-    finally:
-        process.send_signal(signal.SIGINT)
-        assert process.wait(60) == 0
-    assert password not in log.read_text()  # the terminal: `cloudsim up`'s own lines, text
+    assert password not in up.log.read_text()  # the terminal: `cloudsim up`'s own lines, text
     # every service writes its own file, where each of its lines is JSON
     folder = tmp_path / "instance" / "logs"
     text = "\n".join((folder / f"{name}.log").read_text() for name in ("web", "worker", "beat"))

@@ -3,12 +3,9 @@ firing alert read back through Prometheus' own HTTP API."""
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
-import signal
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -22,6 +19,7 @@ from cloudsim.config import Config
 from cloudsim.extensions import db
 from tests.monitoring.support import UPLINK_CAP, Season, measurable_season
 from tests.support.servers import free_port, wait_for
+from tests.support.up import cloudsim_up
 
 PROMETHEUS = shutil.which("prometheus")
 pytestmark = pytest.mark.skipif(PROMETHEUS is None, reason="Debian's prometheus is not installed")
@@ -30,39 +28,18 @@ pytestmark = pytest.mark.skipif(PROMETHEUS is None, reason="Debian's prometheus 
 @pytest.fixture
 def cloudsim(tmp_path: Path, pytestconfig: pytest.Config) -> Iterator[tuple[str, Season]]:
     """Run `cloudsim up` (two web processes) with a live run in its database; yield its URL."""
-    web = free_port()
-    env = dict(
-        os.environ,
-        CLOUDSIM_INSTANCE_DIR=str(tmp_path / "instance"),
-        CLOUDSIM_BIND=f"127.0.0.1:{web}",
-        CLOUDSIM_REDIS_PORT=str(free_port()),
-        CLOUDSIM_WEB_WORKERS="2",
-        CLOUDSIM_WORKER_CONCURRENCY="1",
-        CLOUDSIM_ADMIN_EMAIL="root@example.org",
-        CLOUDSIM_ADMIN_PASSWORD="a password for the prometheus test",
-        CLOUDSIM_LOG_LEVEL="WARNING",
-    )
-    env.pop("CLOUDSIM_REDIS_URL", None)
-    log = tmp_path / "up.log"
-    with log.open("wb") as out:
-        process = subprocess.Popen(
-            [sys.executable, "-m", "cloudsim.cli", "up"],
-            env=env,
-            cwd=pytestconfig.rootpath,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    try:
-        wait_for(lambda: "CloudSim is running at" in log.read_text(), 120, "cloudsim up")
-        app = create_app(Config.from_env(env))
+    settings = {
+        "CLOUDSIM_WEB_WORKERS": "2",
+        "CLOUDSIM_ADMIN_PASSWORD": "a password for the prometheus test",
+        "CLOUDSIM_LOG_LEVEL": "WARNING",
+    }
+    with cloudsim_up(tmp_path, pytestconfig.rootpath, **settings) as up:
+        app = create_app(Config.from_env(up.env))
         with app.app_context():
             season = measurable_season()
             db.session.remove()
             db.engine.dispose()
-        yield f"127.0.0.1:{web}", season
-    finally:
-        process.send_signal(signal.SIGINT)
-        assert process.wait(60) == 0
+        yield up.address, season
 
 
 @pytest.fixture
