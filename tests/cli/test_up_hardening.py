@@ -3,14 +3,13 @@ its control socket is the instance's own (two CloudSims on one machine never sha
 
 from __future__ import annotations
 
-import os
 import socket
 from pathlib import Path
 
 import pytest
 
-from tests.cli.test_up import _start, _stop
-from tests.support.servers import free_port, wait_for
+from tests.support.servers import wait_for
+from tests.support.up import cloudsim_up
 
 HARDENING = ("Content-Security-Policy", "X-Frame-Options", "X-Content-Type-Options")
 
@@ -28,31 +27,16 @@ def _raw_get(port: int, target: str) -> bytes:
 def test_gunicorn_answers_carry_the_headers_and_its_socket_is_the_instances(
     tmp_path: Path, pytestconfig: pytest.Config
 ) -> None:
-    web, redis_port = free_port(), free_port()
     instance = tmp_path / "instance"
-    env = dict(
-        os.environ,
-        CLOUDSIM_INSTANCE_DIR=str(instance),
-        CLOUDSIM_BIND=f"127.0.0.1:{web}",
-        CLOUDSIM_REDIS_PORT=str(redis_port),
-        CLOUDSIM_WEB_WORKERS="1",
-        CLOUDSIM_WORKER_CONCURRENCY="1",
-        CLOUDSIM_ADMIN_EMAIL="root@example.org",
-        CLOUDSIM_LOG_LEVEL="WARNING",
-    )
-    env.pop("CLOUDSIM_REDIS_URL", None)
-    log = tmp_path / "up.log"
-    process = _start(env, log, pytestconfig.rootpath)
-    try:
-        wait_for(lambda: "CloudSim is running at" in log.read_text(), 240, "cloudsim up")
+    settings = {"CLOUDSIM_WEB_WORKERS": "1", "CLOUDSIM_LOG_LEVEL": "WARNING"}
+    with cloudsim_up(tmp_path, pytestconfig.rootpath, **settings) as up:
+        port = int(up.address.rpartition(":")[2])
         wait_for((instance / "gunicorn.ctl").is_socket, 30, "gunicorn's control socket")
-        answer = _raw_get(web, "/" + "a" * 10_000)  # over gunicorn's request-line limit
+        answer = _raw_get(port, "/" + "a" * 10_000)  # over gunicorn's request-line limit
         head = answer.split(b"\r\n\r\n", 1)[0].decode("latin-1")
         assert head.startswith("HTTP/1.1 414"), head
         for header in HARDENING:
             assert f"\r\n{header}: " in head, head
-        normal = _raw_get(web, "/login").split(b"\r\n\r\n", 1)[0].decode("latin-1")
+        normal = _raw_get(port, "/login").split(b"\r\n\r\n", 1)[0].decode("latin-1")
         assert normal.startswith("HTTP/1.1 200") and "Content-Security-Policy" in normal
-    finally:
-        _stop(process)
     assert not (instance / "gunicorn.ctl").exists()

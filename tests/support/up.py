@@ -48,7 +48,7 @@ def cloudsim_up(tmp_path: Path, root: Path, **settings: str) -> Iterator[Up]:
             stderr=subprocess.STDOUT,
         )
     try:
-        wait_for(lambda: "CloudSim is running at" in log.read_text(), 120, "cloudsim up")
+        wait_for(lambda: "CloudSim is running at" in log.read_text(), 240, "cloudsim up")
         yield Up(address, env, log)
     finally:
         process.send_signal(signal.SIGINT)
