@@ -36,6 +36,7 @@ from cloudsim.extensions import db
 from cloudsim.launched_constellations import router_control
 from cloudsim.models import Run, RunState
 from provisioners.remote.ssh import (
+    CommandFailed,
     ConnectionCache,
     ConnectPolicy,
     SSHError,
@@ -179,8 +180,11 @@ class LiveReader:
                 return Answer(role, time.time(), figures, machine)
             executor.run(target, "true")
             return Answer(role, time.time(), None, machine)
-        except (CloudSimError, SSHError, KeyError, TypeError, ValueError):
-            self.connections.evict(target)
+        except (CloudSimError, SSHError, KeyError, TypeError, ValueError) as exc:
+            # a command that ran and failed (csrouter restarting) says nothing against the
+            # connection; closing it would also close those it carries (sim's, through router)
+            if not isinstance(exc.__cause__ or exc, CommandFailed):
+                self.connections.evict(target)
             raise
 
 

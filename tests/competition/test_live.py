@@ -23,6 +23,7 @@ from cloudsim.competition.live import LiveReader
 from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.models import Role, Run, Team, utcnow
+from constellations.plans.router import CSROUTER_COMMAND
 from provisioners.providers.local import netns
 from provisioners.providers.local.driver import LocalNodeDriver
 from provisioners.remote.ssh import ConnectionCache
@@ -131,6 +132,31 @@ def test_the_reader_caches_a_runs_figures_and_every_view_reads_the_cache(
         assert len(lines) == 2 and "t=9.8/" in lines[0] and "score=2" in lines[0]
         assert "RUN-SIM-SILENT" in lines[0]
     finally:
+        reader._pool.shutdown(wait=True)
+        reader.connections.clear()
+
+
+def test_a_router_daemon_that_fails_leaves_the_connections_open(
+    app: Flask, team_a: Team, host: Host
+) -> None:
+    """csrouter restarting fails the counters command, not the connection: closing the router's
+    connection would also close the simulator's, which rides through it in a vrc."""
+    run = live_run(team_a.id, "a-router-down", host, roles=("sim", "router"))
+    config = app.config["CLOUDSIM"]
+    reader = LiveReader(ConnectionCache())
+    down = "#!/bin/sh\necho 'csrouter: the csrouter daemon does not answer' >&2\nexit 3\n"
+    host.run(f"cp {CSROUTER_COMMAND} /tmp/csrouter.up")
+    host.run(f"printf '%s' {shlex.quote(down)} > {CSROUTER_COMMAND}")
+    try:
+        for sim_time in (7.5, 8.5):  # past the stand-in score log's 5.0
+            _write_live(host, run, sim_time, 1.0)
+            await_sim_time(reader, config, run.id, sim_time)
+        reader.refresh(config)
+        cached, _ = live.read(live.connection(config), run.id)
+        assert "router" not in cached.get("heard", {})  # it failed every time
+        assert reader.connections.stats().evicted == 0
+    finally:
+        host.run(f"cp /tmp/csrouter.up {CSROUTER_COMMAND}")
         reader._pool.shutdown(wait=True)
         reader.connections.clear()
 
