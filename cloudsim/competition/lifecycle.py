@@ -25,6 +25,7 @@ from cloudsim.extensions import db
 from cloudsim.jobs.runner import Payload
 from cloudsim.jobs.service import enqueue
 from cloudsim.models import Run, RunState, utcnow
+from cloudsim.notifications.service import notify_run_event, run_ended_event
 
 
 @dataclass(frozen=True)
@@ -119,6 +120,8 @@ def needs_review(run: Run, why: str) -> None:
     run.state = RunState.NEEDS_REVIEW
     run.error, run.error_code = why, RUN_END_UNKNOWN
     run.review_since = utcnow()
+    # here, not in the callers: the stop job and the supervisor both hand runs over
+    notify_run_event(run, "needs_review")
 
 
 def settled(run: Run, accept: bool, end_reason: str) -> None:
@@ -129,3 +132,4 @@ def settled(run: Run, accept: bool, end_reason: str) -> None:
         run.error_code = RUN_REVIEWED_FAILED
     run.finished_at = utcnow()
     run.active_constellation_id = None
+    notify_run_event(run, run_ended_event(run))  # the end people were told would follow

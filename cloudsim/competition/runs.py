@@ -148,8 +148,8 @@ def settle_review(actor: Actor, run_id: int, accept: bool, note: str) -> Run:
         decision="accept" if accept else "fail",
         note=note[:2000],
     )
+    run.officer_note = note[:2000]  # before settling: the notice it sends quotes it
     lifecycle.settled(run, accept, end_reason)
-    run.officer_note = note[:2000]
     db.session.flush()
     return run
 

@@ -9,12 +9,13 @@ from flask.views import MethodView
 
 from cloudsim.api.common import Blueprint, SelectPage, caller
 from cloudsim.jobs.schemas import JobSchema
-from cloudsim.launched_constellations import service, vpn
+from cloudsim.launched_constellations import progress, service, vpn
 from cloudsim.launched_constellations.capacity import visible_room
 from cloudsim.launched_constellations.schemas import (
     CapacityQuerySchema,
     CapacitySchema,
     ConstellationSchema,
+    ConstellationStatusSchema,
     ConstellationUpdateSchema,
     LaunchedSchema,
     LaunchSchema,
@@ -65,10 +66,11 @@ class Capacity(MethodView):
 
 @blp.route("/constellations/<int:ref>")
 class ConstellationById(MethodView):
-    @blp.response(200, ConstellationSchema)
+    @blp.response(200, ConstellationStatusSchema)
     def get(self, ref: int) -> Any:
-        """Return a constellation with its machines and their verification."""
-        return service.get_constellation(caller(), ref)
+        """Return a constellation with its machines, their verification and when each was last
+        heard from, and its latest job's step and since when."""
+        return progress.detail(service.get_constellation(caller(), ref))
 
     @blp.arguments(ConstellationUpdateSchema)
     @blp.response(200, ConstellationSchema)

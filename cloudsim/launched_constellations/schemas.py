@@ -18,6 +18,16 @@ class MachineSchema(Schema):
     verification = fields.Dict()
 
 
+class HeardMachineSchema(MachineSchema):
+    heard = fields.Str(
+        allow_none=True,
+        metadata={
+            "description": "when CloudSim last heard from it (ISO 8601): a running run's live "
+            "reader, else its verification (then followed by ' (verification)')"
+        },
+    )
+
+
 class ConstellationSchema(Schema):
     id = fields.Int()
     name = fields.Str()
@@ -26,11 +36,26 @@ class ConstellationSchema(Schema):
     team_id = fields.Int(allow_none=True)
     state = fields.Str()
     error = fields.Str(allow_none=True)
+    error_code = fields.Str(
+        allow_none=True, metadata={"description": "the failure's stable code (docs/error-codes.md)"}
+    )
     created_at = fields.DateTime()
     team_sudo = fields.Bool(
         metadata={"description": "May the team's members use sudo on the field computers"}
     )
     machines = fields.List(fields.Nested(MachineSchema))
+
+
+class ConstellationStatusSchema(ConstellationSchema):
+    job_kind = fields.Str(
+        allow_none=True, metadata={"description": "its latest job: launch, retry, terminate"}
+    )
+    job_state = fields.Str(allow_none=True)
+    step = fields.Str(allow_none=True, metadata={"description": "the latest job's current step"})
+    step_since = fields.Str(
+        allow_none=True, metadata={"description": "when it entered that step (ISO 8601)"}
+    )
+    machines = fields.List(fields.Nested(HeardMachineSchema))
 
 
 class ConstellationUpdateSchema(Schema):

@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import re
-from datetime import UTC, datetime, time, timedelta
-
 from flask import (
     Blueprint,
     current_app,
@@ -21,19 +18,19 @@ from cloudsim.auth.forms import ConfirmForm
 from cloudsim.auth.policy import role_required
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
+from cloudsim.jobs.progress import step_since
 from cloudsim.jobs.views import job_summary
 from cloudsim.launched_constellations import access, service, vpn
 from cloudsim.launched_constellations.capacity import describe, room
 from cloudsim.launched_constellations.forms import LaunchForm
-from cloudsim.models import Constellation, Job, Role
+from cloudsim.launched_constellations.progress import last_heard
+from cloudsim.models import Role
 from cloudsim.people.service import visible_teams
 from cloudsim.web.downloads import attachment
 from cloudsim.web.inputs import query_id, query_int
 from constellations.plans.base import member_account_name
 
 bp = Blueprint("constellations", __name__)
-# how a job log marks a stage: "HH:MM:SS == stage" (JobContext.stage)
-STAGE_LINE = re.compile(r"^(\d\d:\d\d:\d\d) == ", re.MULTILINE)
 
 
 @bp.route("/constellations")
@@ -96,31 +93,6 @@ def show(ref: int) -> ResponseReturnValue:
         field_computers=access.field_computers(constellation),
         ssh_config=access.ssh_config(constellation, current_user),
     )
-
-
-def step_since(job: Job | None) -> str | None:
-    """Return when the job entered its current stage (its log's last "HH:MM:SS == stage")."""
-    if job is None:
-        return None
-    entered = STAGE_LINE.findall(job.log or "")
-    if not entered:
-        return job.updated_at.isoformat()
-    at = datetime.combine(job.updated_at.date(), time.fromisoformat(entered[-1]), UTC)
-    if at > job.updated_at + timedelta(seconds=1):  # the stage began before midnight
-        at -= timedelta(days=1)
-    return at.isoformat()
-
-
-def last_heard(constellation: Constellation) -> dict[str, str]:
-    """Return when CloudSim last heard from each machine: a live run's reader, or verification."""
-    from cloudsim.competition.live import machines_heard  # the live reader is the runs' feature
-
-    heard = machines_heard(current_app.config["CLOUDSIM"], constellation.id)
-    for machine in constellation.machines:
-        verified = (machine.verification or {}).get("at")
-        if verified and machine.name not in heard:
-            heard[machine.name] = f"{verified} (verification)"
-    return heard
 
 
 @bp.route("/constellations/<int:ref>/status")

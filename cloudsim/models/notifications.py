@@ -27,7 +27,7 @@ class Webhook(Base):
 
 
 class RunNotice(Base):
-    """One event of one run (started, ended, failed): made once, so nothing is sent twice."""
+    """One event of one run (started, ended, failed, needs_review): made once, never sent twice."""
 
     __tablename__ = "run_notices"
     __table_args__ = (UniqueConstraint("run_id", "event"),)

@@ -51,6 +51,8 @@ class TeamInstance(Base):
     health: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     error: Mapped[str | None] = mapped_column(Text)  # why it is in error or unreachable
     checked_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
+    # when it last answered the master (a health check or a sync), unlike checked_at
+    heard_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     last_sync_at: Mapped[datetime | None] = mapped_column(UTCDateTime)
     sync_error: Mapped[str | None] = mapped_column(Text)  # why it is behind, if it is
     # what the last sync changed (drift put back, or the master's news) and what it reported

@@ -20,4 +20,4 @@ class WebhookForm(FlaskForm):
 class RunEmailsForm(FlaskForm):
     """Whether one wants run e-mails."""
 
-    run_emails = BooleanField("E-mail me when my team's runs start, end or fail")
+    run_emails = BooleanField("E-mail me when my team's runs start, end, fail or need review")

@@ -32,7 +32,7 @@ from cloudsim.models import (
 from cloudsim.notifications.summary import run_summary
 
 log = logging.getLogger(__name__)
-EVENTS = ("started", "ended", "failed")
+EVENTS = ("started", "ended", "failed", "needs_review")
 UNSENT = "cloudsim.unsent_notices"  # session.info: (notice id, delivery ids) sent after commit
 MAX_URL = 500
 
@@ -72,7 +72,8 @@ def notify_run_event(run: Run, event_name: str) -> RunNotice | None:
 
 
 def run_ended_event(run: Run) -> str:
-    """Return the event a run's end is: failed for an error, ended otherwise."""
+    """Return the event a run's end is: failed for an error, ended otherwise (also when an
+    officer settles a run in review)."""
     return "failed" if run.state == RunState.ERROR else "ended"
 
 

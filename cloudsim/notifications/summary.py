@@ -10,7 +10,12 @@ from flask import current_app
 from cloudsim.config import Config
 from cloudsim.models import Run
 
-SUBJECTS = {"started": "started", "ended": "ended", "failed": "failed"}
+SUBJECTS = {
+    "started": "started",
+    "ended": "ended",
+    "failed": "failed",
+    "needs_review": "needs an officer's review",
+}
 
 
 def _link(path: str) -> str:
@@ -34,6 +39,7 @@ def run_summary(run: Run) -> dict[str, Any]:
         "downlink_bits_left": max(task.downlink_bits - run.downlink_bits_used, 0),
         "end_reason": run.end_reason,
         "error": run.error,
+        "officer_note": run.officer_note,
         "links": {
             "run": _link(f"/runs/{run.id}"),
             "replay": _link(f"/runs/{run.id}/view"),
@@ -63,6 +69,15 @@ def run_email(payload: dict[str, Any], sender: str, to: str) -> EmailMessage:
         lines.append(f"Ended by: {run['end_reason']}")
     if run["error"]:
         lines.append(f"Error: {run['error']}")
+    if run.get("officer_note"):  # .get: notices recorded before the note was in the summary
+        lines.append(f"Officer's note: {run['officer_note']}")
+    if event == "needs_review":
+        # the run is not live and not ranked: say who acts and that another e-mail follows
+        lines += [
+            "",
+            "CloudSim could not establish how this run ended. An officer checks its logs and",
+            "settles it (finished or failed); you get another e-mail when they do.",
+        ]
     lines += ["", f"Run: {run['links']['run']}", f"Replay: {run['links']['replay']}"]
     lines += [f"Log {name}: {url}" for name, url in run["links"]["logs"].items()]
     lines += ["", "You can stop these e-mails on your account page."]

@@ -22,6 +22,7 @@ from cloudsim.team_instances.schemas import (
     OutcomeSchema,
     SyncResultSchema,
     TeamInstanceSchema,
+    TeamInstanceStatusSchema,
 )
 
 blp = Blueprint("api_team_instances", __name__, description="Team instances (master and instance)")
@@ -45,10 +46,11 @@ class TeamInstances(MethodView):
 
 @blp.route("/team-instances/<int:instance_id>")
 class TeamInstanceById(MethodView):
-    @blp.response(200, TeamInstanceSchema)
+    @blp.response(200, TeamInstanceStatusSchema)
     def get(self, instance_id: int) -> Any:
-        """Return a team instance: state, health, last sync (admins)."""
-        return service.get_instance(caller(), instance_id)
+        """Return a team instance: state, health, when it was last heard from, last sync, and
+        its latest job's step and since when (admins)."""
+        return service.status(caller(), instance_id)
 
     @blp.arguments(AssignSchema)
     @blp.response(200, TeamInstanceSchema)

@@ -34,6 +34,7 @@ def instance_data(instance: TeamInstance) -> dict[str, object]:
         "health": instance.health,
         "error": instance.error,
         "checked_at": instance.checked_at,
+        "heard_at": instance.heard_at,
         "last_sync_at": instance.last_sync_at,
         "sync_error": instance.sync_error,
         "sync_report": instance.sync_report,

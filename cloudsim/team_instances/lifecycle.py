@@ -29,7 +29,7 @@ def healthy(instance: TeamInstance, url: str, health: dict[str, Any]) -> None:
     instance.url = url
     instance.version = str(health.get("version", ""))[:64] or None
     instance.health = health
-    instance.checked_at = utcnow()
+    instance.checked_at = instance.heard_at = utcnow()
 
 
 def unreachable(instance: TeamInstance, error: str) -> None:

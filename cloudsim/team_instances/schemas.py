@@ -45,6 +45,10 @@ class TeamInstanceSchema(Schema):
     health = fields.Nested(HealthSchema)
     error = fields.Str(allow_none=True)
     checked_at = fields.DateTime(allow_none=True)
+    heard_at = fields.DateTime(
+        allow_none=True,
+        metadata={"description": "when it last answered the master (a health check or a sync)"},
+    )
     last_sync_at = fields.DateTime(allow_none=True)
     sync_error = fields.Str(allow_none=True)
     sync_report = fields.Nested(
@@ -63,6 +67,18 @@ class TeamInstanceSchema(Schema):
         },
     )
     created_at = fields.DateTime()
+
+
+class TeamInstanceStatusSchema(TeamInstanceSchema):
+    job_kind = fields.Str(
+        allow_none=True,
+        metadata={"description": "its latest job (its own: sync, launch; its constellation's)"},
+    )
+    job_state = fields.Str(allow_none=True)
+    step = fields.Str(allow_none=True, metadata={"description": "the latest job's current step"})
+    step_since = fields.Str(
+        allow_none=True, metadata={"description": "when it entered that step (ISO 8601)"}
+    )
 
 
 class DeploySchema(Schema):

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from sqlalchemy import Select, select
 from sqlalchemy.orm import selectinload
 
+from cloudsim.api.common import columns
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import Actor, require_role
 from cloudsim.errors import Conflict, InvalidInput, NotFound
 from cloudsim.extensions import db
 from cloudsim.jobs.control import cancel_jobs
+from cloudsim.jobs.progress import job_step
 from cloudsim.launched_constellations import service as constellations
 from cloudsim.models import AuditEvent, InstanceState, Job, Role, Team, TeamInstance
 from cloudsim.models.lookup import by_id_or_name
@@ -37,6 +41,26 @@ def get_instance(actor: Actor, ref: int | str) -> TeamInstance:
     if instance is None:
         raise NotFound.of("team instance", ref)
     return instance
+
+
+def latest_job(instance: TeamInstance) -> Job | None:
+    """Return the instance's most recent job: its own (sync, launch through it) or its
+    constellation's (deploy, terminate)."""
+    return db.session.scalar(
+        select(Job)
+        .where(
+            ((Job.target_type == "team_instance") & (Job.target_id == instance.id))
+            | ((Job.target_type == "constellation") & (Job.target_id == instance.constellation_id))
+        )
+        .order_by(Job.created_at.desc())
+        .limit(1)
+    )
+
+
+def status(actor: Actor, ref: int | str) -> dict[str, Any]:
+    """Return a team instance's columns and its latest job's step and since when (admins)."""
+    instance = get_instance(actor, ref)
+    return {**columns(instance), **job_step(latest_job(instance))}
 
 
 def drift_history(actor: Actor, instance: TeamInstance, limit: int = 20) -> list[AuditEvent]:

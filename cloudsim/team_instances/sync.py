@@ -100,6 +100,7 @@ def _plain(value: object) -> object:
 def synced(instance: TeamInstance, answer: dict[str, Any]) -> None:
     """Record a sync the instance accepted, and what it changed (drift put back, or news)."""
     instance.last_sync_at, instance.sync_error = utcnow(), None
+    instance.heard_at = instance.last_sync_at
     report = {key: list(answer.get(key) or []) for key in ("changed", "reported", "drift")}
     instance.sync_report = report
     if report["changed"]:
@@ -236,13 +237,16 @@ def _start_syncs(session: Session) -> None:
     teams = session.info.pop(DIRTY, None)
     if not teams:
         return
-    query = select(TeamInstance).where(TeamInstance.state == InstanceState.READY)
+    # the two columns it needs only: this runs on every commit that touches a team or a user
+    query = select(TeamInstance.id, TeamInstance.team_id).where(
+        TeamInstance.state == InstanceState.READY
+    )
     if EVERY_TEAM not in teams:
         query = query.where(TeamInstance.team_id.in_(teams))
     # One job per change, never folded into a queued one: a queued job may already have read
     # the database when this commit lands (the periodic reconcile would catch up, but later).
-    for instance in session.scalars(query):
-        enqueue(SYNC_JOB, SYSTEM, InstanceJob(instance.id), team_id=instance.team_id)
+    for instance_id, team_id in session.execute(query).all():
+        enqueue(SYNC_JOB, SYSTEM, InstanceJob(instance_id), team_id=team_id)
     session.info.pop(DIRTY, None)  # the jobs' own rows concern nobody
 
 

@@ -10,6 +10,7 @@ from cloudsim.auth.forms import ConfirmForm
 from cloudsim.auth.policy import role_required
 from cloudsim.errors import CloudSimError
 from cloudsim.extensions import db
+from cloudsim.jobs.progress import job_step
 from cloudsim.models import Role
 from cloudsim.people.service import visible_teams
 from cloudsim.team_instances import launch, service
@@ -102,6 +103,7 @@ def _show(
         settings=settings or ProviderSettingsForm().offer(),
         kept=launch.kept_settings(instance.id),
         drift=service.drift_history(current_user, instance),
+        step=job_step(service.latest_job(instance)),
     ), status
 
 

@@ -1,5 +1,5 @@
 """A launch never goes silent: its page says the current step and since when, each machine's
-last-heard time, and a failure's code."""
+last-heard time, and a failure's code; so does the API."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from flask import Flask
 from cloudsim.competition import live
 from cloudsim.extensions import db
 from cloudsim.models import Constellation, ConstellationState, Job, JobState, Machine, User
-from tests.conftest import log_in
+from tests.conftest import log_in, token_for
 
 
 def test_the_launch_page_says_the_step_since_when_and_when_each_machine_was_heard(
@@ -74,3 +74,19 @@ def test_the_launch_page_says_the_step_since_when_and_when_each_machine_was_hear
         page = client.get(f"/constellations/{constellation.id}").get_data(as_text=True)
         assert "LAUNCH-SIM-SLOW" in page and "2026-11-27T21:00:07+00:00" in page
         assert "2026-11-27T21:00:29+00:00" in page
+        # the API answers the same, from the same helpers
+        answer = app.test_client().get(
+            f"/api/v1/constellations/{constellation.id}", headers=token_for(user)
+        )
+        assert answer.status_code == 200, answer.get_json()
+        found = answer.get_json()
+        assert (found["step"], found["step_since"]) == ("verify", "2026-11-27T21:00:07+00:00")
+        assert (found["job_kind"], found["job_state"]) == ("constellation.launch", "failed")
+        assert (found["state"], found["error_code"]) == ("error", "LAUNCH-SIM-SLOW")
+        assert {m["name"]: m["heard"] for m in found["machines"]} == heard
+    stranger = people["user_b"]
+    assert stranger is not None
+    hidden = app.test_client().get(
+        f"/api/v1/constellations/{constellation.id}", headers=token_for(stranger)
+    )
+    assert hidden.status_code == 404

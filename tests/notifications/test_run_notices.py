@@ -270,12 +270,14 @@ def test_a_failing_webhook_is_retried_and_both_tries_are_listed(
     assert list(events) == ["started"]
 
 
-def test_a_run_whose_end_cannot_be_established_waits_for_review_untold(
-    app: Flask, team_a: Team, mailbox: Mailbox, worker: None
+def test_a_run_in_review_is_told_and_so_is_how_an_officer_settles_it(
+    app: Flask, team_a: Team, mailbox: Mailbox, hook: Hook, worker: None
 ) -> None:
-    """The real stop job on a run it cannot reach: the run goes to needs_review for an officer
-    to settle (its end is not known), and no "ended" or "failed" notice goes out meanwhile."""
-    member = make_user(Role.USER, team_a)
+    """The real stop job on a run it cannot reach: the run goes to needs_review and its people
+    and webhooks are told so (not "ended" or "failed"); the officer's settling, submitted on
+    the run page, is told as the run's end."""
+    member, officer = make_user(Role.USER, team_a), make_user(Role.OFFICER)
+    add_webhook(SYSTEM, hook.url, SECRET)
     run = running_run(team_a)
     wait_for(lambda: len(mailbox.to(member.email)) == 1, 30, "the started e-mail")
     # the run has no constellation: its real stop job cannot reach it
@@ -286,8 +288,42 @@ def test_a_run_whose_end_cannot_be_established_waits_for_review_untold(
     db.session.expire_all()
     assert db.session.get(Run, run.id).state == RunState.NEEDS_REVIEW  # type: ignore[union-attr]
     notices = db.session.scalars(select(RunNotice.event).where(RunNotice.run_id == run.id))
-    assert sorted(notices) == ["started"]
-    assert len(mailbox.to(member.email)) == 1
+    assert sorted(notices) == ["needs_review", "started"]
+
+    def mailed(address: str, words: str) -> list[Message]:
+        return [m for m in mailbox.to(address) if words in m["Subject"]]
+
+    wait_for(lambda: mailed(member.email, "review"), 30, "the member's review e-mail")
+    wait_for(lambda: mailed(officer.email, "review"), 30, "the officer's review e-mail")
+    [review] = mailed(member.email, "review")
+    subject = f"CloudSim: run {run.id} of {run.task.name} needs an officer's review"
+    assert review["Subject"] == subject
+    text = review.get_payload()
+    assert isinstance(text, str)
+    assert "State: needs_review" in text and "An officer checks its logs" in text, text
+    wait_for(lambda: len(hook.received) == 2, 30, "the started and needs_review events")
+    body = json.loads(hook.received[1][1])
+    assert (body["event"], body["run"]["state"]) == ("run.needs_review", "needs_review")
+    assert hook.received[1][0]["x-cloudsim-event"] == "run.needs_review"
+    assert not mailed(member.email, "failed") and not mailed(member.email, "ended")
+
+    client = app.test_client()
+    log_in(client, officer)
+    page = client.get(f"/runs/{run.id}").get_data(as_text=True)
+    token = csrf_token(page.split('id="settle"', 1)[1])
+    settled = client.post(
+        f"/runs/{run.id}/settle",
+        data={"decision": "fail", "note": "sim never came back", "csrf_token": token},
+    )
+    assert settled.status_code == 302
+    wait_for(lambda: mailed(member.email, "failed"), 30, "the member's failed e-mail")
+    wait_for(lambda: len(hook.received) == 3, 30, "the failed event")
+    body = json.loads(hook.received[2][1])
+    assert (body["event"], body["run"]["state"]) == ("run.failed", "error")
+    assert "constellation no longer exists" in body["run"]["error"]
+    assert body["run"]["officer_note"] == "sim never came back"
+    [failed] = mailed(member.email, "failed")
+    assert "Officer's note: sim never came back" in str(failed.get_payload())
 
 
 def test_a_dead_smtp_server_never_fails_the_run_and_its_tries_are_recorded(

@@ -7,7 +7,9 @@ import contextlib
 import io
 import json
 import threading
+import uuid
 import zipfile
+from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
@@ -35,13 +37,13 @@ from cloudsim.models import (
     TeamInstance,
     utcnow,
 )
-from cloudsim.team_instances import service
+from cloudsim.team_instances import lifecycle, service
 from cloudsim.team_instances.client import Endpoint, InstanceError
 from cloudsim.team_instances.poll import check_instances
 from cloudsim.team_instances.sync import SYNC_JOB, InstanceJob, sync_lock
 from cloudsim.worlds.service import update_world
 from tests.competition.support import open_task
-from tests.conftest import csrf_token, log_in, make_user
+from tests.conftest import csrf_token, log_in, make_user, token_for
 from tests.support.servers import RedisServer, wait_for
 
 
@@ -220,3 +222,50 @@ def _state(job_id: str) -> JobState | None:
     db.session.expire_all()
     job = db.session.get(Job, job_id)
     return job.state if job is not None else None
+
+
+def test_the_instance_page_and_api_say_its_step_since_when_and_when_it_was_heard(
+    app: Flask, team_a: Team
+) -> None:
+    ((instance, _),) = service.deploy(SYSTEM, name="team-a", provider="local", team_id=team_a.id)
+    lifecycle.healthy(instance, "https://192.0.2.7", {"version": "1.0"})
+    heard = instance.heard_at
+    assert heard is not None
+    lifecycle.unreachable(instance, "no route")  # checked again, not heard from
+    assert instance.checked_at is not None and instance.checked_at >= heard
+    sync = Job(
+        id=str(uuid.uuid4()),
+        kind=SYNC_JOB,
+        target_type="team_instance",
+        target_id=instance.id,
+        state=JobState.RUNNING,
+        stage="push",
+        log="00:10:01 == connect\n00:10:02 == push\n",
+    )
+    db.session.add(sync)
+    db.session.commit()
+    sync.updated_at = datetime(2026, 11, 28, 0, 10, 5, tzinfo=UTC)
+    db.session.commit()
+    assert instance.heard_at == heard
+
+    admin = make_user(Role.ADMIN)
+    answer = (
+        app.test_client()
+        .get(f"/api/v1/team-instances/{instance.id}", headers=token_for(admin))
+        .get_json()
+    )
+    assert (answer["job_kind"], answer["job_state"]) == (SYNC_JOB, "running")
+    assert (answer["step"], answer["step_since"]) == ("push", "2026-11-28T00:10:02+00:00")
+    assert answer["heard_at"].startswith(heard.strftime("%Y-%m-%dT%H:%M:%S"))
+    assert answer["state"] == "unreachable"
+    client = app.test_client()
+    log_in(client, admin)
+    page = client.get(f"/team-instances/{instance.id}").get_data(as_text=True)
+    assert heard.strftime("%Y-%m-%d %H:%M:%S UTC") in page.split('id="heard"', 1)[1]
+    step = page.split('id="step"', 1)[1].split("</dd>", 1)[0]
+    assert "team_instance.sync (running): push" in step and "2026-11-28T00:10:02" in step
+    member = make_user(Role.USER, team_a)
+    refused = app.test_client().get(
+        f"/api/v1/team-instances/{instance.id}", headers=token_for(member)
+    )
+    assert refused.status_code in (403, 404)
