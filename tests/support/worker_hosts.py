@@ -134,7 +134,7 @@ def boot_hosts(config: Config, network: str, names: dict[str, str | None]) -> li
 
     def boot(name: str) -> Host:
         keys = generate_keypair(name)
-        node = driver.create_node(  # type: ignore[call-arg]  (the local driver's own options)
+        node = driver.create_node(  # type: ignore[call-arg]
             name,
             auth=NodeAuthSSHKey(keys.public),
             ex_network=lan,
