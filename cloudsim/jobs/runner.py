@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import socket
 import threading
 import time
 import traceback
@@ -352,6 +353,8 @@ def run_job(self: object, job_id: str) -> str:
     ctx = JobContext(job)
     if job.attempts > 1:
         ctx.log(f"resuming after an interrupted attempt (attempt {job.attempts})")
+    # with workers on several machines, the log says which one ran (or resumed) the job
+    ctx.log(f"attempt {job.attempts} on worker host {socket.gethostname()}")
     body = JOB_KINDS.get(job.kind)
     settings = current_app.config["CLOUDSIM"]
     # ending the process frees the slot only in a worker's pool process, never in a command

@@ -46,10 +46,13 @@ def port_accepts(port: int) -> bool:
 class RedisServer:
     """redis-server on a free loopback port with its data in a temporary folder."""
 
-    def __init__(self, data_dir: Path) -> None:
+    def __init__(self, data_dir: Path, password: str | None = None) -> None:
         self.port = free_port()
+        self.password = password
+        # a password is what a Redis reached from other machines needs (see docs/scaling-out.md)
+        auth = ["--requirepass", password] if password else []
         self.process = subprocess.Popen(
-            redis_command(self.port, data_dir), stdout=subprocess.DEVNULL
+            [*redis_command(self.port, data_dir), *auth], stdout=subprocess.DEVNULL
         )
         try:
             wait_for(lambda: port_accepts(self.port), 15, "redis-server")
@@ -57,8 +60,9 @@ class RedisServer:
             self.stop()  # a Redis that never came up is not left running
             raise
 
-    def url(self, db: int = 0) -> str:
-        return f"redis://127.0.0.1:{self.port}/{db}"
+    def url(self, db: int = 0, host: str = "127.0.0.1", port: int | None = None) -> str:
+        auth = f":{self.password}@" if self.password else ""
+        return f"redis://{auth}{host}:{port or self.port}/{db}"
 
     def stop(self) -> None:
         self.process.terminate()
@@ -77,7 +81,9 @@ def bench_redis(folder: Path) -> RedisServer:
 class PostgresServer:
     """A throwaway PostgreSQL cluster (initdb) on a free port, run as the postgres user."""
 
-    def __init__(self) -> None:
+    def __init__(self, password: str | None = None) -> None:
+        """Start the cluster; with a password it also listens on 127.0.0.1, where every TCP
+        login needs a password (SCRAM), as a server other machines reach must."""
         # Not under pytest's tmp_path: the postgres user cannot enter root's 0700 folders.
         root = Path(tempfile.mkdtemp(prefix="cloudsim-test-pg-"))
         initdb = shutil.which("initdb") or "/usr/lib/postgresql/15/bin/initdb"
@@ -90,13 +96,19 @@ class PostgresServer:
         for path in (root, self.sockets):
             path.mkdir(parents=True, exist_ok=True)
             os.chown(path, user.pw_uid, user.pw_gid)
+        self.password = password
+        auth = ["-A", "trust"]
+        listen = "''"
+        if password:
+            # the socket stays the harness's (trust); TCP logins need the password
+            auth = ["--auth-local=trust", "--auth-host=scram-sha-256"]
+            listen = "'127.0.0.1'"
         self._as_postgres(
             [
                 initdb,
                 "-D",
                 str(self.data),
-                "-A",
-                "trust",
+                *auth,
                 "-U",
                 "postgres",
                 "--no-sync",
@@ -105,7 +117,7 @@ class PostgresServer:
             ]
         )
         options = (
-            f"-p {self.port} -k {self.sockets} -c listen_addresses='' -c fsync=off "
+            f"-p {self.port} -k {self.sockets} -c listen_addresses={listen} -c fsync=off "
             "-c synchronous_commit=off -c full_page_writes=off"
         )
         self._as_postgres(
@@ -122,6 +134,20 @@ class PostgresServer:
             ]
         )
         self.pid = int((self.data / "postmaster.pid").read_text().split()[0])
+
+    def create_login_database(self, name: str, host: str = "127.0.0.1", port: int = 0) -> str:
+        """Create a role and a database it owns, both called name, with the server's password;
+        return the SQLAlchemy URL that logs in over TCP at host:port (default: this server)."""
+        assert self.password, "a login over TCP needs a server started with a password"
+        self._psql(f"CREATE ROLE \"{name}\" LOGIN PASSWORD '{self.password}'")
+        self._psql(f'CREATE DATABASE "{name}" OWNER "{name}"')
+        return f"postgresql+psycopg://{name}:{self.password}@{host}:{port or self.port}/{name}"
+
+    def _psql(self, statement: str) -> None:
+        psql = shutil.which("psql") or "psql"
+        self._as_postgres(
+            [psql, "-h", str(self.sockets), "-p", str(self.port), "-q", "-c", statement, "postgres"]
+        )
 
     def _as_postgres(self, argv: list[str]) -> None:
         subprocess.run(
