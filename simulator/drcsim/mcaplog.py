@@ -16,12 +16,15 @@ import math
 import os
 import struct
 import zlib
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from functools import cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from mcap.exceptions import McapError
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from drcsim.rundir import MCAP
@@ -224,6 +227,29 @@ def compressed_image(sim_time: float, frame: str, width: int, height: int, pixel
         "data": base64.b64encode(png_rgb8(width, height, pixels)).decode(),
         "format": "png",
     }
+
+
+def read_messages(path: Path) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    """Yield every message of an MCAP file in file order, reading a file whose writer died
+    (no summary, a torn last chunk) up to its last whole chunk."""
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    with path.open("rb") as handle:
+        records = StreamReader(handle).records
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                return
+            except (McapError, EOFError, ValueError, struct.error):
+                return  # the torn end of a file whose writer died
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message) and record.channel_id in channels:
+                channel = channels[record.channel_id]
+                yield schemas.get(channel.schema_id), channel, record
 
 
 def log_path(directory: Path) -> Path:
