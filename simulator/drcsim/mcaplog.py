@@ -20,7 +20,7 @@ from collections.abc import Iterator, Sequence
 from functools import cache
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import IO, Any, cast
 
 from mcap.exceptions import McapError
 from mcap.records import Channel, Message, Schema
@@ -109,7 +109,7 @@ class McapWriter:
     def __init__(self, path: Path, metadata: dict[str, dict[str, str]]) -> None:
         self._handle = _Unbuffered(path)
         self._writer = Writer(
-            self._handle, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD
+            cast(IO[bytes], self._handle), chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD
         )
         self._writer.start(profile=PROFILE, library=LIBRARY)
         for name, record in metadata.items():
@@ -173,9 +173,7 @@ def _finite(value: Any) -> Any:
     return value
 
 
-def transforms(
-    sim_time: float, frames: Sequence[str], flat: Sequence[float]
-) -> bytes:
+def transforms(sim_time: float, frames: Sequence[str], flat: Sequence[float]) -> bytes:
     """Return a foxglove.FrameTransforms message: each named frame's world pose (x, y, z,
     qx, qy, qz, qw, as `viewer.link_poses` gives them), encoded."""
     sec_nsec = stamp(sim_time)
@@ -208,7 +206,9 @@ def png_rgb8(width: int, height: int, pixels: bytes) -> bytes:
     rows = b"".join(b"\x00" + pixels[y * stride : (y + 1) * stride] for y in range(height))
 
     def block(kind: bytes, body: bytes) -> bytes:
-        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+        return (
+            struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+        )
 
     header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
     return (
@@ -219,7 +219,9 @@ def png_rgb8(width: int, height: int, pixels: bytes) -> bytes:
     )
 
 
-def compressed_image(sim_time: float, frame: str, width: int, height: int, pixels: bytes) -> dict[str, Any]:
+def compressed_image(
+    sim_time: float, frame: str, width: int, height: int, pixels: bytes
+) -> dict[str, Any]:
     """Return a foxglove.CompressedImage of an rgb8 image, as PNG."""
     return {
         "timestamp": stamp(sim_time),
@@ -227,6 +229,36 @@ def compressed_image(sim_time: float, frame: str, width: int, height: int, pixel
         "data": base64.b64encode(png_rgb8(width, height, pixels)).decode(),
         "format": "png",
     }
+
+
+def write_bandwidth(
+    path: Path, series: dict[str, tuple[Sequence[int], int | None]], offset_s: float
+) -> int:
+    """Write the router's per-second bits of each direction (bits per second from the arm,
+    cap) as an MCAP file whose times line up with run.mcap's; return how many messages.
+
+    Second N of the series covers N..N+1 s after the arm, which was `offset_s` seconds after
+    the simulator's start (its simulated time 0); it is logged at its end.
+    """
+    messages = []
+    for direction, (bits_per_second, cap) in sorted(series.items()):
+        used = 0
+        for second, bits in enumerate(bits_per_second):
+            used += bits
+            at = offset_s + second + 1
+            record = {
+                "timestamp": stamp(max(0.0, at)),
+                "direction": direction,
+                "bits": bits,
+                "used_bits": used,
+                "cap_bits": cap,
+            }
+            messages.append((max(0.0, at), direction, record))
+    writer = McapWriter(path, {"drcsim.bandwidth": {"offset_s": repr(offset_s)}})
+    for at, _, record in sorted(messages, key=lambda m: (m[0], m[1])):
+        writer.message(BANDWIDTH_TOPIC, at, record)
+    writer.close()
+    return len(messages)
 
 
 def read_messages(path: Path) -> Iterator[tuple[Schema | None, Channel, Message]]:

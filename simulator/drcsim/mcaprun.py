@@ -21,16 +21,26 @@ from drcsim.mcaplog import (
     stamp,
     transforms,
 )
+from drcsim.sensors import LIDAR_IN_HEAD
 from drcsim.viewer import describe_scene, link_poses, moving_bodies
 
 GROUND_SIZE = 200.0  # m: the side of the square that stands for the infinite ground plane
 PELVIS_FRAME = "robot/pelvis"  # the robot's base link frame (where its sensors hang from)
-HEAD_FRAME = "robot/head"  # the frame the lidar and camera give their readings in
+HEAD_FRAME = "robot/head"
+# The fields of a team topic's message that its MCAP topic keeps (lidar and camera convert).
+TEAM_FIELDS = {
+    "joint_states": ("name", "position", "velocity", "effort"),
+    "imu": ("orientation", "angular_velocity", "linear_acceleration"),
+    "contact": ("force",),
+    "robot_state": ("step", "pelvis", "joints", "behaviour", "score"),
+}  # the frame the lidar and camera give their readings in
 
 
 def frame_names(scene: dict[str, Any], roles: dict[str, Any]) -> dict[int, list[str]]:
     """Return each body's link frame names ("robot/pelvis", "vehicle/steering_wheel", ...)."""
-    named = {body: role for role, body in roles.items() if isinstance(body, int) and role != "robot_link"}
+    named = {
+        body: role for role, body in roles.items() if isinstance(body, int) and role != "robot_link"
+    }
     names: dict[int, list[str]] = {}
     seen: set[str] = set()
     for entry in scene["bodies"]:
@@ -58,7 +68,11 @@ def scene_update(scene: dict[str, Any], frames: dict[int, list[str]]) -> dict[st
         for shape in entry["shapes"]:
             by_link.setdefault(shape["link"], []).append(shape)
         for link, shapes in sorted(by_link.items()):
-            primitives: dict[str, list[dict[str, Any]]] = {"cubes": [], "spheres": [], "cylinders": []}
+            primitives: dict[str, list[dict[str, Any]]] = {
+                "cubes": [],
+                "spheres": [],
+                "cylinders": [],
+            }
             for shape in shapes:
                 _primitives(shape, primitives)
             entity_frame = names[link] if static is None else WORLD_FRAME
@@ -93,7 +107,9 @@ def _primitives(shape: dict[str, Any], into: dict[str, list[dict[str, Any]]]) ->
     kind = shape["type"]
     if kind == "box":
         x, y, z = shape["size"]  # pybullet gives half extents
-        into["cubes"].append({"pose": at, "size": {"x": 2 * x, "y": 2 * y, "z": 2 * z}, "color": color})
+        into["cubes"].append(
+            {"pose": at, "size": {"x": 2 * x, "y": 2 * y, "z": 2 * z}, "color": color}
+        )
     elif kind == "plane":
         size = {"x": GROUND_SIZE, "y": GROUND_SIZE, "z": 0.001}
         into["cubes"].append({"pose": at, "size": size, "color": color})
@@ -168,7 +184,9 @@ class RunRecorder:
             flat: list[float] = []
             for body in self.bodies:
                 flat.extend(link_poses(self.client, body))
-            self.writer.write("/tf", "foxglove.FrameTransforms", sim_time, transforms(sim_time, self.frames, flat))
+            self.writer.write(
+                "/tf", "foxglove.FrameTransforms", sim_time, transforms(sim_time, self.frames, flat)
+            )
             self.writer.message(
                 "/robot/estimate",
                 sim_time,
@@ -182,19 +200,11 @@ class RunRecorder:
 
     def team(self, topic: str, sim_time: float, message: dict[str, Any]) -> None:
         """Record a message the team was sent on a LAN topic, as it was sent."""
-        when = {"timestamp": stamp(sim_time)}
-        if topic == "joint_states":
-            fields = ("name", "position", "velocity", "effort")
-            self.writer.message("/team/joint_states", sim_time, {**when, **{k: message[k] for k in fields}})
-        elif topic == "imu":
-            fields = ("orientation", "angular_velocity", "linear_acceleration")
-            self.writer.message("/team/imu", sim_time, {**when, **{k: message[k] for k in fields}})
-        elif topic == "contact":
-            self.writer.message("/team/contact", sim_time, {**when, "force": message["force"]})
-        elif topic == "robot_state":
-            fields = ("step", "pelvis", "joints", "behaviour", "score")
-            self.writer.message("/team/robot_state", sim_time, {**when, **{k: message[k] for k in fields}})
-        elif topic == "lidar":
+        fields = TEAM_FIELDS.get(topic)
+        if fields is not None:
+            record = {"timestamp": stamp(sim_time), **{key: message[key] for key in fields}}
+            self.writer.message(f"/team/{topic}", sim_time, record)
+        if topic == "lidar":
             self._lidar(sim_time, message)
         elif topic == "camera":
             self._camera(sim_time, message)
@@ -206,7 +216,7 @@ class RunRecorder:
         scan = {
             "timestamp": stamp(sim_time),
             "frame_id": HEAD_FRAME,
-            "pose": pose([0.16, 0.0, 0.12], [np.sin(half), 0.0, 0.0, np.cos(half)]),
+            "pose": pose(LIDAR_IN_HEAD.tolist(), [np.sin(half), 0.0, 0.0, np.cos(half)]),
             "start_angle": float(message["angle_min"]),
             "end_angle": float(message["angle_max"]),
             "ranges": np.round(ranges.astype(np.float64), 3).tolist(),
@@ -226,16 +236,31 @@ class RunRecorder:
         sim_time = float(event["sim_time"])
         kind = event.get("event")
         if kind == "checkpoint":
-            text, level = f"checkpoint {event.get('checkpoint')} reached: {event.get('name', '')}", INFO
+            text, level = (
+                f"checkpoint {event.get('checkpoint')} reached: {event.get('name', '')}",
+                INFO,
+            )
         elif kind == "fall":
             text, level = f"fall {event.get('falls', '')}", WARNING
         elif kind == "run_end":
-            text, level = f"run ended: {event.get('reason', '')} (score {event.get('score', 0)})", INFO
+            text, level = (
+                f"run ended: {event.get('reason', '')} (score {event.get('score', 0)})",
+                INFO,
+            )
         else:
             text, level = str(kind), INFO
-        log = {"timestamp": stamp(sim_time), "level": level, "message": text.strip(), "name": "drcsim.scoring", "file": "", "line": 0}
+        log = {
+            "timestamp": stamp(sim_time),
+            "level": level,
+            "message": text.strip(),
+            "name": "drcsim.scoring",
+            "file": "",
+            "line": 0,
+        }
         self.writer.message("/score", sim_time, log)
-        self.writer.message("/score/events", sim_time, {"timestamp": stamp(sim_time), "event": event})
+        self.writer.message(
+            "/score/events", sim_time, {"timestamp": stamp(sim_time), "event": event}
+        )
 
     def command(self, sim_time: float, step: int, message: dict[str, Any], source: str) -> None:
         """Record a command the simulator applied before step `step`, with its sender."""
