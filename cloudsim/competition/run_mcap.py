@@ -2,15 +2,19 @@
 
 The simulator cannot see the router's counters, so CloudSim writes them as a second MCAP
 file once it has both logs; tools open the two together and merge them by topic and time.
+Each second is placed at its end's wall-clock time less the simulator's start (the score
+log's run_start): simulated time, for a run that kept real time.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
-from csrouter.bandwidth_log import DIRECTIONS, read_bandwidth_log
+from csrouter.bandwidth_log import DIRECTIONS
 from drcsim.mcaplog import write_bandwidth
 from drcsim.rundir import BANDWIDTH_MCAP, SCORE, read_run_span
 
@@ -21,35 +25,48 @@ from cloudsim.models import Artifact, Run
 BANDWIDTH_LOG = "bandwidth.jsonl"
 
 
-def armed_at(lines: list[str]) -> float | None:
-    """Return when (epoch seconds) the bandwidth log says the router was armed."""
+def bandwidth_samples(lines: Iterable[str], started: float) -> list[dict[str, Any]]:
+    """Return the bandwidth log's per-second lines as samples for `write_bandwidth`, timed
+    from `started` (epoch seconds); lines that are not the log's records are skipped."""
+    caps: dict[str, int | None] = {direction: None for direction in DIRECTIONS}
+    samples = []
     for line in lines:
         try:
             record = json.loads(line)
-            if isinstance(record, dict) and record.get("event") == "armed":
-                return datetime.fromisoformat(record["time"]).timestamp()
-        except (ValueError, KeyError, TypeError):
-            continue
-    return None
+            if not isinstance(record, dict):
+                continue
+            if record.get("event") == "armed":
+                given = record.get("caps_bits") or {}
+                caps = {d: None if given.get(d) is None else int(given[d]) for d in DIRECTIONS}
+            elif record.get("direction") in DIRECTIONS and "bytes" in record:
+                end = datetime.fromisoformat(record["time"]).timestamp()
+                samples.append(
+                    {
+                        "at": round(end - started, 3),
+                        "direction": record["direction"],
+                        "bits": 8 * int(record["bytes"]),
+                        "used_bits": 8 * int(record.get("cumulative_bytes", 0)),
+                        "cap_bits": caps[record["direction"]],
+                    }
+                )
+        except (ValueError, KeyError, TypeError, AttributeError):
+            continue  # e.g. a torn last line
+    return samples
 
 
 def store_bandwidth_mcap(run: Run, store: LogStore, staging: Path) -> str | None:
     """Write and store the run's bandwidth.mcap from its stored logs (again if repeated);
-    return what it says, None when the run has no bandwidth log."""
-    bandwidth = artifact_for(run, BANDWIDTH_LOG)
-    if bandwidth is None:
+    return what it holds, None when the run has no bandwidth or score log to time it by."""
+    bandwidth, score = artifact_for(run, BANDWIDTH_LOG), artifact_for(run, SCORE)
+    if bandwidth is None or score is None:
         return None
-    lines = list(store.lines(bandwidth.location))
-    usage = read_bandwidth_log(lines)
-    score = artifact_for(run, SCORE)
-    started = read_run_span(store.lines(score.location))[0] if score is not None else None
-    armed = armed_at(lines)
-    # the router is armed before the simulator starts: its seconds count from earlier
-    offset = armed - started if armed is not None and started is not None else 0.0
-    series = {d: (usage[d].bits_per_second, usage[d].cap_bits) for d in DIRECTIONS}
+    started = read_run_span(store.lines(score.location))[0]
+    if started is None:
+        return None
+    samples = bandwidth_samples(store.lines(bandwidth.location), started)
     staging.mkdir(parents=True, exist_ok=True)
     local = staging / BANDWIDTH_MCAP
-    count = write_bandwidth(local, series, offset)
+    count = write_bandwidth(local, samples)
     checksum, size = file_sha256(local), local.stat().st_size
     name = store.object_name(run.id, BANDWIDTH_MCAP)
     store.keep(local, name)
@@ -59,4 +76,4 @@ def store_bandwidth_mcap(run: Run, store: LogStore, staging: Path) -> str | None
         run.artifacts.append(artifact)
     artifact.location, artifact.sha256, artifact.size = name, checksum, size
     db.session.flush()
-    return f"{BANDWIDTH_MCAP}: {count} messages, {size} bytes, sha256 {checksum[:12]}"
+    return f"{BANDWIDTH_MCAP}: {count} seconds' counts, {size} bytes, sha256 {checksum[:12]}"

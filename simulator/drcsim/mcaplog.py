@@ -231,34 +231,24 @@ def compressed_image(
     }
 
 
-def write_bandwidth(
-    path: Path, series: dict[str, tuple[Sequence[int], int | None]], offset_s: float
-) -> int:
-    """Write the router's per-second bits of each direction (bits per second from the arm,
-    cap) as an MCAP file whose times line up with run.mcap's; return how many messages.
+def write_bandwidth(path: Path, samples: Sequence[dict[str, Any]]) -> int:
+    """Write the router's per-second counts as an MCAP file whose times line up with
+    run.mcap's; return how many messages it holds.
 
-    Second N of the series covers N..N+1 s after the arm, which was `offset_s` seconds after
-    the simulator's start (its simulated time 0); it is logged at its end.
+    Each sample has `at` (the end of the second it covers, in seconds since the simulator's
+    start), `direction`, `bits`, `used_bits` and `cap_bits`; one before the start is left out.
     """
-    messages = []
-    for direction, (bits_per_second, cap) in sorted(series.items()):
-        used = 0
-        for second, bits in enumerate(bits_per_second):
-            used += bits
-            at = offset_s + second + 1
-            record = {
-                "timestamp": stamp(max(0.0, at)),
-                "direction": direction,
-                "bits": bits,
-                "used_bits": used,
-                "cap_bits": cap,
-            }
-            messages.append((max(0.0, at), direction, record))
-    writer = McapWriter(path, {"drcsim.bandwidth": {"offset_s": repr(offset_s)}})
-    for at, _, record in sorted(messages, key=lambda m: (m[0], m[1])):
-        writer.message(BANDWIDTH_TOPIC, at, record)
+    kept = sorted(
+        (sample for sample in samples if sample["at"] >= 0),
+        key=lambda sample: (sample["at"], sample["direction"]),
+    )
+    writer = McapWriter(path, {})
+    for sample in kept:
+        at = float(sample["at"])
+        record = {key: sample[key] for key in ("direction", "bits", "used_bits", "cap_bits")}
+        writer.message(BANDWIDTH_TOPIC, at, {"timestamp": stamp(at), **record})
     writer.close()
-    return len(messages)
+    return len(kept)
 
 
 def read_messages(path: Path) -> Iterator[tuple[Schema | None, Channel, Message]]:
