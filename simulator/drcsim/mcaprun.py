@@ -13,17 +13,21 @@ import numpy as np
 from drcsim._bullet import BulletClient
 from drcsim.mcaplog import (
     INFO,
+    KEY_FRAME_S,
+    TOPICS,
     WARNING,
     WORLD_FRAME,
     McapWriter,
+    TransformEncoder,
     compressed_image,
+    estimate_pose,
     pose,
     stamp,
-    transforms,
 )
 from drcsim.sensors import LIDAR_IN_HEAD
-from drcsim.viewer import describe_scene, link_poses, moving_bodies
+from drcsim.viewer import describe_scene, moving_bodies
 
+TICK_HZ = 100  # the simulation's ticks (scene.TICK_STEPS physics steps)
 GROUND_SIZE = 200.0  # m: the side of the square that stands for the infinite ground plane
 PELVIS_FRAME = "robot/pelvis"  # the robot's base link frame (where its sensors hang from)
 HEAD_FRAME = "robot/head"
@@ -157,6 +161,38 @@ def _compose(link: Sequence[float], local: dict[str, Any]) -> dict[str, Any]:
     return pose(position, _quat_multiply(link[3:7], [o["x"], o["y"], o["z"], o["w"]]))
 
 
+class LinkPoses:
+    """Reads every link frame's world pose of some bodies, as `viewer.link_poses` does but
+    without its forward kinematics (which would change the next physics step, so a replay
+    would diverge from the recorded run) and about six times as fast."""
+
+    def __init__(self, client: BulletClient, bodies: Sequence[int]) -> None:
+        self.client = client
+        self.plan = []
+        for body in bodies:
+            info = client.getDynamicsInfo(body, -1)
+            inverse = client.invertTransform(info[3], info[4])
+            offset, turn = inverse
+            identity = all(abs(v) < 1e-12 for v in offset) and abs(abs(turn[3]) - 1) < 1e-12
+            links = list(range(client.getNumJoints(body)))
+            self.plan.append((body, None if identity else inverse, links))
+
+    def read(self) -> list[float]:
+        """Return the poses, x, y, z, qx, qy, qz, qw a frame, each body's base first."""
+        client, flat = self.client, []
+        for body, inverse, links in self.plan:
+            xyz, quat = client.getBasePositionAndOrientation(body)
+            if inverse is not None:  # the base's URDF frame, not its inertial frame
+                xyz, quat = client.multiplyTransforms(xyz, quat, *inverse)
+            flat.extend(xyz)
+            flat.extend(quat)
+            if links:
+                for state in client.getLinkStates(body, links):
+                    flat.extend(state[4])
+                    flat.extend(state[5])
+        return flat
+
+
 class RunRecorder:
     """Writes one run's MCAP log as the simulation goes."""
 
@@ -175,27 +211,23 @@ class RunRecorder:
         self.bodies = moving_bodies(client)
         self.frames = [name for body in self.bodies for name in names[body]]
         self.pose_every_ticks = max(1, pose_every_ticks)
+        self.key_every_ticks = self.pose_every_ticks * max(
+            1, round(KEY_FRAME_S * TICK_HZ / self.pose_every_ticks)
+        )
+        self.encoder = TransformEncoder(self.frames)
+        self.poses = LinkPoses(client, self.bodies)
         self.writer.message("/world/scene", 0.0, scene_update(scene, names))
         self.ticks = 0
 
     def tick(self, sim_time: float, estimate: dict[str, list[float]]) -> None:
-        """Record the 100 Hz tick: every moving link's pose (at its rate) and the estimate."""
+        """Record the 100 Hz tick: the moving links' poses (at their rate) and the estimate."""
         if self.ticks % self.pose_every_ticks == 0:
-            flat: list[float] = []
-            for body in self.bodies:
-                flat.extend(link_poses(self.client, body))
-            self.writer.write(
-                "/tf", "foxglove.FrameTransforms", sim_time, transforms(sim_time, self.frames, flat)
-            )
-            self.writer.message(
-                "/robot/estimate",
-                sim_time,
-                {
-                    "timestamp": stamp(sim_time),
-                    "frame_id": WORLD_FRAME,
-                    "pose": pose(estimate["position"], estimate["orientation"]),
-                },
-            )
+            flat = self.poses.read()
+            key = self.ticks % self.key_every_ticks == 0
+            poses = self.encoder.encode(sim_time, flat, key)
+            self.writer.write("/tf", TOPICS["/tf"], sim_time, poses)
+            data = estimate_pose(sim_time, estimate["position"], estimate["orientation"])
+            self.writer.write("/robot/estimate", TOPICS["/robot/estimate"], sim_time, data)
         self.ticks += 1
 
     def team(self, topic: str, sim_time: float, message: dict[str, Any]) -> None:

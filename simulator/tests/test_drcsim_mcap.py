@@ -125,8 +125,16 @@ def test_a_served_run_reads_back_message_by_message(server: Any, tmp_path: Path)
     # the world once; every moving link's pose at 100 Hz; the estimate with it
     assert counts["/world/scene"] == 1
     assert counts["/tf"] == counts["/robot/estimate"] == final["step"] // 10
-    frames = {t["child_frame_id"] for t in decoded["/tf"][-1]["transforms"]}
+    # a key frame each second holds every frame; between them, the frames that moved
+    key_frames = [
+        m
+        for m in decoded["/tf"]
+        if m["transforms"][:1] and m["transforms"][0]["timestamp"]["nsec"] == 0
+    ]
+    frames = {t["child_frame_id"] for t in decoded["/tf"][0]["transforms"]}
     assert {"robot/pelvis", "robot/head", "robot/l_foot"} <= frames
+    assert len(key_frames) == final["step"] // 1000 + 1
+    assert all({t["child_frame_id"] for t in m["transforms"]} == frames for m in key_frames)
     entities = decoded["/world/scene"][0]["entities"]
     hung = {e["frame_id"] for e in entities if e["frame_locked"]}
     assert "robot/pelvis" in hung and hung <= frames  # every moving shape follows a frame
