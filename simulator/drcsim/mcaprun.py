@@ -223,7 +223,8 @@ class RunRecorder:
         """Record the 100 Hz tick: the moving links' poses (at their rate) and the estimate."""
         if self.ticks % self.pose_every_ticks == 0:
             flat = self.poses.read()
-            key = self.ticks % self.key_every_ticks == 0
+            # every frame at each whole second (the first message has them all anyway)
+            key = round(sim_time * TICK_HZ) % self.key_every_ticks == 0
             poses = self.encoder.encode(sim_time, flat, key)
             self.writer.write("/tf", TOPICS["/tf"], sim_time, poses)
             data = estimate_pose(sim_time, estimate["position"], estimate["orientation"])

@@ -92,8 +92,8 @@ def test_a_served_run_reads_back_message_by_message(server: Any, tmp_path: Path)
         # refused (the stand behaviour owns the joint) and still recorded, as in commands.jsonl
         assert not client.request({"op": "joints", "position": {"neck_ry": 0.2}})["ok"]
         assert client.behaviour("walk", pose=[1.0, 0.0, 0.0])["ok"]
-        for _ in range(30):
-            client.step(10)
+        for _ in range(30):  # past 1 s: a key frame of /tf
+            client.step(40)
             replies += 1
             while (got := client.receive(0.05)) is not None:
                 received[got[0]] += 1
@@ -133,7 +133,7 @@ def test_a_served_run_reads_back_message_by_message(server: Any, tmp_path: Path)
     ]
     frames = {t["child_frame_id"] for t in decoded["/tf"][0]["transforms"]}
     assert {"robot/pelvis", "robot/head", "robot/l_foot"} <= frames
-    assert len(key_frames) == final["step"] // 1000 + 1
+    assert len(key_frames) == final["step"] // 1000  # at 1 s, 2 s, ...
     assert all({t["child_frame_id"] for t in m["transforms"]} == frames for m in key_frames)
     entities = decoded["/world/scene"][0]["entities"]
     hung = {e["frame_id"] for e in entities if e["frame_locked"]}
