@@ -32,6 +32,7 @@ bench: install
 	$(BIN)/python -m bench.viewer
 	$(BIN)/python -m bench.cli_start
 	$(BIN)/python -m bench.verification
+	$(BIN)/python -m bench.mcap_log
 	$(BIN)/drcsim bench
 
 clean:
