@@ -33,6 +33,7 @@ bench: install
 	$(BIN)/python -m bench.cli_start
 	$(BIN)/python -m bench.verification
 	$(BIN)/python -m bench.scaleout
+	$(BIN)/python -m bench.mcap_log
 	$(BIN)/drcsim bench
 
 clean:

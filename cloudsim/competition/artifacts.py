@@ -67,6 +67,8 @@ RUN_LOGS = (
     RemoteLog("meta", "sim", rundir.META),
     RemoteLog("commands", "sim", rundir.COMMANDS),
     RemoteLog("state", "sim", rundir.STATE),
+    # the run's log for robotics tools; a simulator of an older release writes none
+    RemoteLog("mcap", "sim", rundir.MCAP, required=False),
     RemoteLog("output", "sim", "simulator.log", required=False),
     RemoteLog("world", "sim", rundir.WORLD, required=False),  # the document it was built from
     RemoteLog("bandwidth", "router", "bandwidth.jsonl"),

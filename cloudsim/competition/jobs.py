@@ -19,13 +19,15 @@ from dataclasses import dataclass, field
 from datetime import datetime
 
 from csrouter.bandwidth_log import read_bandwidth_log
-from drcsim.rundir import FINAL, SCORE, WORLD, read_score_log, serve_argv
+from drcsim.rundir import BANDWIDTH_MCAP, FINAL, SCORE, WORLD, read_score_log, serve_argv
 from flask import current_app
+from mcap.exceptions import McapError
 
 from cloudsim.competition import current_run, lifecycle
 from cloudsim.competition.artifacts import LogStore, artifact_for, collect_logs, run_dir
 from cloudsim.competition.lifecycle import RunJob
 from cloudsim.competition.login_logs import snapshot_login_logs
+from cloudsim.competition.run_mcap import store_bandwidth_mcap
 from cloudsim.competition.run_steps import simulator_span, step_done, unit_started_at
 from cloudsim.config import Config
 from cloudsim.errors import CloudSimError
@@ -337,6 +339,13 @@ def _stop_on_machines(
     problems += collect_logs(
         run, reach.executor, reach.by_role(), store, staging, lambda line: ctx.log(line)
     )
+    try:  # the router's bandwidth as MCAP, beside the simulator's run.mcap
+        made = store_bandwidth_mcap(run, store, staging)
+    except (OSError, McapError) as exc:
+        problems.append(f"{BANDWIDTH_MCAP}: {exc}")
+    else:
+        if made:
+            ctx.log(made)
     step_done("run.stop", "logs")
     return problems
 

@@ -17,12 +17,14 @@ from drcsim.control import JointController
 from drcsim.driving import VehicleDrive
 from drcsim.errors import CommandError
 from drcsim.estimator import Estimator
+from drcsim.mcaplog import log_path
+from drcsim.mcaprun import RunRecorder
 from drcsim.mud import MudDrag
 from drcsim.runlog import RunLog, state_digest
 from drcsim.scene import TICK_STEPS, TIMESTEP, build_scene
 from drcsim.scoring import GateFrame, Observation, Scorer
 from drcsim.sensors import Sensors, SensorSettings
-from drcsim.viewer import PoseStream
+from drcsim.viewer import PoseStream, scene_roles
 from drcsim.worlds import load_world
 
 Publisher = Callable[[str, dict[str, Any]], None]
@@ -38,6 +40,7 @@ class RunOptions:
     sensors: SensorSettings = field(default_factory=SensorSettings)
     publish: Publisher | None = None
     pose_rate_hz: float = 30.0  # frames of the on-demand `poses` topic, in simulated time
+    mcap_pose_hz: float = 100.0  # body poses (/tf) in the run's MCAP log, in simulated time
     wall_clock: Callable[[], float] = time.time
 
 
@@ -74,8 +77,13 @@ class Simulation:
         self.pose_every = self.poses.every_steps(TIMESTEP)
         self.hose_start_z = self._hose_z()
         self.log: RunLog | None = None
+        self.recorder: RunRecorder | None = None
         if self.options.log_dir is not None:
             self.log = RunLog(self.options.log_dir, self.meta(), self.options.world_document)
+            every = max(1, round(100.0 / self.options.mcap_pose_hz))  # ticks are 100 Hz
+            self.recorder = RunRecorder(
+                log_path(self.options.log_dir), self.client, scene_roles(self), self.meta(), every
+            )
         self.closed = False
         self._emit_score([{"event": "run_start", "sim_time": 0.0, "score": 0}])
 
@@ -103,12 +111,15 @@ class Simulation:
         return self.scorer.ended
 
     # -- commands -------------------------------------------------------------------------
-    def apply_command(self, message: dict[str, Any]) -> dict[str, Any]:
-        """Apply a checked command (see protocol.check_command) before the next step."""
+    def apply_command(self, message: dict[str, Any], source: str = "") -> dict[str, Any]:
+        """Apply a checked command (see protocol.check_command) before the next step;
+        `source` is the sender's address, for the record."""
         if self.ended:
             return {"ok": False, "error": "the run has ended"}
         if self.log is not None:
             self.log.command(self.step_count, message)
+        if self.recorder is not None:
+            self.recorder.command(self.sim_time, self.step_count, message, source)
         try:
             details = self._dispatch(message)
         except CommandError as exc:
@@ -152,7 +163,10 @@ class Simulation:
             publish = self.options.publish
             if publish is not None and self.active_topics:
                 for topic in self.sensors.due(self.step_count, self.active_topics):
-                    publish(topic, self.sensors.compute(topic, self.sim_time))
+                    message = self.sensors.compute(topic, self.sim_time)
+                    publish(topic, message)
+                    if self.recorder is not None:
+                        self.recorder.team(topic, self.sim_time, message)
                 if "poses" in self.active_topics and self.step_count % self.pose_every == 0:
                     publish("poses", self.poses.frame(self.sim_time, self.step_count))
         return done
@@ -167,6 +181,8 @@ class Simulation:
         events = self.scorer.update(self.sim_time, self.observation(), height, tilt)
         if self.log is not None:
             self.log.state(self.step_count, self.sim_time, self.state_vector())
+        if self.recorder is not None:
+            self.recorder.tick(self.sim_time, self.estimator.pelvis())
         self._emit_score(events)
         publish = self.options.publish
         if publish is not None:
@@ -175,7 +191,10 @@ class Simulation:
                 {"t": self.sim_time, "step": self.step_count, "wall": self.options.wall_clock()},
             )
             if "robot_state" in self.active_topics:
-                publish("robot_state", self.snapshot())
+                snapshot = self.snapshot()
+                publish("robot_state", snapshot)
+                if self.recorder is not None:
+                    self.recorder.team("robot_state", self.sim_time, snapshot)
         if self.ended:
             self._finish()
 
@@ -184,22 +203,24 @@ class Simulation:
             event["wall_time"] = self.options.wall_clock()
             if self.log is not None:
                 self.log.score(event)
+            if self.recorder is not None:
+                self.recorder.score(event)
             if self.options.publish is not None:
                 self.options.publish("score", event)
 
     def _finish(self) -> None:
         if self.log is not None and not self.closed:
-            vector = self.state_vector()
-            self.log.close(
-                {
-                    "step": self.step_count,
-                    "sim_time": self.sim_time,
-                    "end_reason": self.scorer.end_reason,
-                    "score": self.scorer.reached,
-                    "falls": self.scorer.falls,
-                    "state_sha256": state_digest(vector),
-                }
-            )
+            final = {
+                "step": self.step_count,
+                "sim_time": self.sim_time,
+                "end_reason": self.scorer.end_reason,
+                "score": self.scorer.reached,
+                "falls": self.scorer.falls,
+                "state_sha256": state_digest(self.state_vector()),
+            }
+            if self.recorder is not None:
+                self.recorder.close(final)
+            self.log.close(final)
         self.closed = True
 
     # -- observation ----------------------------------------------------------------------

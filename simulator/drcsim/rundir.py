@@ -22,12 +22,16 @@ SCORE = "score.jsonl"
 FINAL = "final.json"
 # The world document the run was built from, when the orchestrator handed one over.
 WORLD = "world.json"
+# The run's log for robotics tools (MCAP, JSON messages; drcsim.mcaplog writes it).
+MCAP = "run.mcap"
+# The router's bandwidth as MCAP, made by CloudSim when it collects a run (open it with MCAP).
+BANDWIDTH_MCAP = "bandwidth.mcap"
 # The served run's live figures (simulated time, RTF, score), rewritten about twice a second
 # while it runs; not a log (it is not collected): a supervisor reads it to follow the run live.
 LIVE = "live.json"
 LIVE_EVERY_S = 0.5
 # Every file a finished run leaves in its directory; FINAL is missing if the simulator died.
-FILES = (SCORE, STATE, COMMANDS, META, FINAL)
+FILES = (SCORE, STATE, COMMANDS, META, FINAL, MCAP)
 # The score log's events worth keeping (run_start says nothing).
 SCORE_EVENTS = ("checkpoint", "fall", "run_end")
 

@@ -225,7 +225,7 @@ class SimServer:
             self._reject(identity, peer, str(exc))
             return
         self.stats.requests += 1
-        reply = self._serve(message)
+        reply = self._serve(message, peer)
         if "id" in message:
             reply["id"] = message["id"]
         self.router.send_multipart([identity, encode(reply)])
@@ -235,18 +235,20 @@ class SimServer:
         log.warning("rejected message from %s: %s", peer, reason)
         self.router.send_multipart([identity, encode({"ok": False, "error": reason})])
 
-    def _serve(self, message: dict[str, Any]) -> dict[str, Any]:
+    def _serve(self, message: dict[str, Any], peer: str) -> dict[str, Any]:
         op = message["op"]
         if op == "hello":
             return {"ok": True, **self.describe()}
-        if op == "state":
-            return {"ok": True, "state": self.sim.snapshot()}
-        if op == "step":
-            if not self.settings.lockstep:
-                return {"ok": False, "error": "step is only accepted in lock-step mode"}
-            self.sim.step(message["steps"])
-            return {"ok": True, "state": self.sim.snapshot()}
-        return self.sim.apply_command(message)
+        if op in ("state", "step"):
+            if op == "step":
+                if not self.settings.lockstep:
+                    return {"ok": False, "error": "step is only accepted in lock-step mode"}
+                self.sim.step(message["steps"])
+            snapshot = self.sim.snapshot()
+            if self.sim.recorder is not None:  # the estimate as the team received it
+                self.sim.recorder.team("robot_state", self.sim.sim_time, snapshot)
+            return {"ok": True, "state": snapshot}
+        return self.sim.apply_command(message, source=peer)
 
     def describe(self) -> dict[str, Any]:
         """Return what a client needs to know about this run (the hello reply)."""

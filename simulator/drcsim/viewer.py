@@ -77,8 +77,13 @@ def _rounded(values: Sequence[float]) -> list[float]:
     return [round(float(v), POSE_DECIMALS) for v in values]
 
 
-def link_poses(client: BulletClient, body: int) -> list[float]:
-    """Return the world pose of every link frame of a body (base first), flattened by 7."""
+def link_poses(client: BulletClient, body: int, kinematics: bool = True) -> list[float]:
+    """Return the world pose of every link frame of a body (base first), flattened by 7.
+
+    Without `kinematics` the links are where the last physics step left them rather than
+    recomputed from the joints: pybullet's forward kinematics changes what the next step
+    computes, so a run's own recording must not ask for it (replays would diverge).
+    """
     base_xyz, base_quat = client.getBasePositionAndOrientation(body)
     # the base pose pybullet reports is its inertial frame; shapes hang off the URDF frame
     inverse = client.invertTransform(*_inertial_frame(client, body, -1))
@@ -86,7 +91,8 @@ def link_poses(client: BulletClient, body: int) -> list[float]:
     flat = [*xyz, *quat]
     count = client.getNumJoints(body)
     if count:
-        for state in client.getLinkStates(body, range(count), computeForwardKinematics=1):
+        states = client.getLinkStates(body, range(count), computeForwardKinematics=kinematics)
+        for state in states:
             flat.extend([*state[4], *state[5]])
     return _rounded(flat)
 

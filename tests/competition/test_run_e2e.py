@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 from celery.contrib.testing.worker import start_worker
 from csrouter.bandwidth_log import read_bandwidth_log
+from drcsim.rundir import BANDWIDTH_MCAP, MCAP
 from drcsim.worlds import document_digest
 from flask import Flask
 from playwright.sync_api import Browser, Page, expect
@@ -42,6 +43,7 @@ from cloudsim.people import service as people_service
 from tests.competition.support import hold_task_2_with_gate_1_near
 from tests.conftest import make_user, token_for
 from tests.launched_constellations.conftest import finished
+from tests.support.mcap_files import validated_topics
 from tests.support.servers import wait_for
 from tests.support.workers import kill_worker, worker_process
 from tests.viewer.conftest import wait_for as wait_in_page
@@ -192,11 +194,12 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
     stored = {a.filename: a for a in run.artifacts}
     handed: dict[str, dict] = {}
     expected = [log for log in RUN_LOGS if kind == "vrc" or log.machine == "sim"]
-    assert {log.filename for log in expected} == set(stored)
+    made = {BANDWIDTH_MCAP} if kind == "vrc" else set()  # by CloudSim, from the router's log
+    assert {log.filename for log in expected} | made == set(stored)
     client = constellations_app.test_client()
     headers = token_for(user_a)
     with machines(run, constellations_config) as reach:
-        for artifact in stored.values():
+        for artifact in (stored[log.filename] for log in expected):
             source = next(log.machine for log in RUN_LOGS if log.filename == artifact.filename)
             target = reach.by_role()[source]
             on_machine = remote_sha256(
@@ -207,6 +210,11 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
             assert hashlib.sha256(body.data).hexdigest() == artifact.sha256 == on_machine
             if artifact.filename in ("world.json", "meta.json"):
                 handed[artifact.filename] = json.loads(body.data)
+            if artifact.filename == MCAP:  # opens in robotics tools, message by message
+                counts, first, last = validated_topics(body.data)
+                assert (first, last) == (0, round(run.sim_seconds * 1e9))
+                assert counts["/tf"] == round(run.sim_seconds * 100)
+                assert counts["/score/events"] == len(run.score_events) + 1  # and run_start
     assert document_digest(handed["world.json"]) == document_digest(world)
     assert handed["meta.json"]["world_digest"] == document_digest(world)
     # collecting again copies nothing: every log is stored with the same checksum
@@ -236,6 +244,11 @@ def test_a_scheduled_run_from_the_browser_to_the_leaderboard(
         store = LogStore(constellations_config)
         usage = read_bandwidth_log(store.lines(stored["bandwidth.jsonl"].location))
         assert usage["uplink"].cap_bits == 115200
+        body = client.get(
+            f"/api/v1/runs/{run.id}/logs/{stored[BANDWIDTH_MCAP].id}", headers=headers
+        )
+        counts, first, last = validated_topics(body.data)
+        assert counts["/router/bandwidth"] >= 2 * (run.sim_seconds - 2)  # both ways each second
     expect(page.get_by_role("link", name="score.jsonl")).to_be_visible()
     page.goto(f"{live_url}/leaderboard")
     expect(page.locator("tr[data-team='Team A'] .checkpoints")).to_have_text(str(run.score))
