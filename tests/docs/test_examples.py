@@ -47,8 +47,9 @@ def test_the_skipped_examples_are_the_named_few() -> None:
 
 @pytest.fixture(scope="module")
 def system(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Up]:
-    """A CloudSim as `make run` starts it (no demo), its admin holding TOKEN."""
-    with cloudsim_up(tmp_path_factory.mktemp("docs-up"), ROOT, CLOUDSIM_ADMIN_TOKEN=TOKEN) as up:
+    """A CloudSim as `make run` starts it (no demo), its admin the default one, holding TOKEN."""
+    settings = {"CLOUDSIM_ADMIN_TOKEN": TOKEN, "CLOUDSIM_ADMIN_EMAIL": "admin@example.org"}
+    with cloudsim_up(tmp_path_factory.mktemp("docs-up"), ROOT, **settings) as up:
         yield up
 
 
