@@ -59,7 +59,10 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "images" / "dashboard.png")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="cloudsim-screenshot-") as folder:
-        settings = {"CLOUDSIM_ADMIN_EMAIL": "admin@example.org", "CLOUDSIM_ADMIN_PASSWORD": PASSWORD}
+        settings = {
+            "CLOUDSIM_ADMIN_EMAIL": "admin@example.org",
+            "CLOUDSIM_ADMIN_PASSWORD": PASSWORD,
+        }
         with cloudsim_up(Path(folder), ROOT, **settings) as up:
             for command in SEASON:
                 subprocess.run(
