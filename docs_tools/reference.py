@@ -57,10 +57,11 @@ def cli_page() -> str:
 def _commands(
     command: click.Command, path: str, parent: click.Context | None = None
 ) -> Iterator[tuple[str, click.Context]]:
-    ctx = click.Context(
-        command, info_name=path.rsplit(" ", 1)[-1], parent=parent, terminal_width=88
+    # the command's own context settings (-h as well as --help), at a fixed width
+    settings = {**command.context_settings, "terminal_width": 88, "max_content_width": 88}
+    ctx = command.context_class(
+        command, info_name=path.rsplit(" ", 1)[-1], parent=parent, **settings
     )
-    ctx.max_content_width = 88
     yield path, ctx
     if isinstance(command, click.Group):
         for name in command.list_commands(ctx):
