@@ -9,7 +9,8 @@ the line before it says what it runs against (docs/developers/docs.md explains e
     <!-- example: skip REASON -->       cannot run here, for REASON (few, and named in the test)
 
 `xfail REASON` after the mode (`<!-- example: drcsim xfail REASON -->`) says the example
-fails today, for REASON: the test then fails as soon as it passes, so the mark goes.
+fails today, for REASON, which quotes (in double quotes) the error it fails with: failing
+otherwise, or passing, fails the test, so the mark goes once the example works.
 
 Other blocks (`text`, `json`, `yaml`, no language) are output, synopses or data, not examples.
 """
@@ -99,8 +100,8 @@ def _xfail(rest: str, path: Path, index: int) -> str:
     if not rest:
         return ""
     word, _, reason = rest.partition(" ")
-    if word != "xfail" or not reason.strip():
-        raise ExampleError(f"{path}:{index}: expected `xfail REASON` after the mode, not {rest!r}")
+    if word != "xfail" or reason.count('"') < 2:
+        raise ExampleError(f'{path}:{index}: expected `xfail REASON ("error")`, not {rest!r}')
     return reason.strip()
 
 
