@@ -2,7 +2,7 @@
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: install run test lint bench clean
+.PHONY: install run test lint bench docs docs-serve clean
 
 install:
 	@bash deploy/install.sh
@@ -36,5 +36,12 @@ bench: install
 	$(BIN)/python -m bench.mcap_log
 	$(BIN)/drcsim bench
 
+# The documentation site (mkdocs.yml): build it into site/, or serve it while editing.
+docs: install
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
+docs-serve: install
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs serve --dev-addr 127.0.0.1:8000
+
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache .mypy_cache
+	rm -rf $(VENV) site .pytest_cache .ruff_cache .mypy_cache

@@ -29,7 +29,7 @@ def _bool(value: str) -> bool:
 
 @dataclass(frozen=True)
 class Setting:
-    """One CLOUDSIM_* variable: its default and what it means (the README table comes from here)."""
+    """One CLOUDSIM_* variable: its default and what it means (the configuration page's row)."""
 
     default: str
     help: str

@@ -1,7 +1,7 @@
 """Stable codes of what goes wrong with runs and launches: each with its cause and what to do.
 
 A code never changes meaning once published: pages and the API show it next to the free text,
-and docs/error-codes.md is this table (a test keeps the two equal).
+and the documentation's error codes page is this table (docs_tools/reference.py puts it there).
 """
 
 from __future__ import annotations
@@ -124,7 +124,7 @@ def describe(code: str, **figures: Any) -> dict[str, str]:
 
 
 def markdown_table() -> str:
-    """Return the table of codes as docs/error-codes.md holds it."""
+    """Return the table of codes as the documentation's error codes page shows it."""
     rows = ["| Code | Cause | What you can do |", "| --- | --- | --- |"]
     rows += [f"| `{c.code}` | {c.cause} | {c.remedy} |" for c in CODES.values()]
     return "\n".join(rows) + "\n"

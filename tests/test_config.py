@@ -1,14 +1,13 @@
-"""Configuration: defaults, generated instance keys, clear errors, and a README that matches."""
+"""Configuration: defaults, generated instance keys, clear errors."""
 
 from __future__ import annotations
 
-import re
 import stat
 from pathlib import Path
 
 import pytest
 
-from cloudsim.config import SETTINGS, Config, ConfigError
+from cloudsim.config import Config, ConfigError
 
 
 def test_defaults_generate_private_keys_once(tmp_path: Path) -> None:
@@ -39,7 +38,4 @@ def test_bad_values_are_named(tmp_path: Path, name: str, value: str, message: st
         Config.from_env({"CLOUDSIM_INSTANCE_DIR": str(tmp_path), name: value})
 
 
-def test_readme_documents_every_setting(pytestconfig: pytest.Config) -> None:
-    readme = (pytestconfig.rootpath / "README.md").read_text()
-    table = set(re.findall(r"^\| `(CLOUDSIM_[A-Z0-9_]+)` \|", readme, re.MULTILINE))
-    assert table == set(SETTINGS), f"README table differs: {table ^ set(SETTINGS)}"
+# The configuration page is generated from SETTINGS: tests/docs/test_site.py checks it.

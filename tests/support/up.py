@@ -25,8 +25,9 @@ class Up:
 
 @contextmanager
 def cloudsim_up(tmp_path: Path, root: Path, **settings: str) -> Iterator[Up]:
-    """Run `cloudsim up` (one worker slot, admin root@example.org, CLOUDSIM_* settings added)
-    until the block ends, then stop it with Ctrl-C and check it exits cleanly."""
+    """Run `cloudsim up` (one worker slot, admin root@example.org, CLOUDSIM_* settings added
+    or replacing these) until the block ends, then stop it with Ctrl-C and check it exits
+    cleanly."""
     address = f"127.0.0.1:{free_port()}"
     env = dict(
         os.environ,
@@ -35,8 +36,8 @@ def cloudsim_up(tmp_path: Path, root: Path, **settings: str) -> Iterator[Up]:
         CLOUDSIM_REDIS_PORT=str(free_port()),
         CLOUDSIM_WORKER_CONCURRENCY="1",
         CLOUDSIM_ADMIN_EMAIL="root@example.org",
-        **settings,
     )
+    env.update(settings)
     env.pop("CLOUDSIM_REDIS_URL", None)  # its own Redis, as `make run` starts it
     log = tmp_path / "up.log"
     with log.open("wb") as out:
