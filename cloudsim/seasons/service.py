@@ -256,7 +256,7 @@ def reveal(actor: Actor, phase: Phase) -> Phase:
 def ranked_tasks(team_user: bool) -> ColumnElement[bool]:
     """Return the condition on Task (outer-joined with Phase) for runs the ranking counts:
     tasks of no phase, or of a phase that counts; a team user's board waits for a reveal."""
-    counts = Phase.counts_in_ranking.is_(True)
+    counts: ColumnElement[bool] = Phase.counts_in_ranking.is_(True)
     if team_user:
         counts = and_(counts, or_(Phase.scores_hidden.is_(False), Phase.revealed_at.is_not(None)))
     return or_(Task.phase_id.is_(None), counts)
