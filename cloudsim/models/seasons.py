@@ -34,9 +34,7 @@ class Phase(Base):
     downlink_bits: Mapped[int] = mapped_column(BigInteger)
     # who may enter: every team, or (entry_phase set) those whose counted runs of that earlier
     # phase scored at least entry_min_score in total
-    entry_phase_id: Mapped[int | None] = mapped_column(
-        ForeignKey("phases.id", ondelete="RESTRICT")
-    )
+    entry_phase_id: Mapped[int | None] = mapped_column(ForeignKey("phases.id"))
     entry_min_score: Mapped[int | None] = mapped_column()
     max_runs_per_task: Mapped[int | None] = mapped_column()
     max_runs_per_day: Mapped[int | None] = mapped_column()  # a day in the phase's time zone

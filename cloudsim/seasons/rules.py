@@ -86,7 +86,7 @@ def _soonest_end(phase: Phase, task: Task, now: datetime) -> datetime | None:
             select(Run.started_at, Task.timeout_s)
             .join(Task, Run.task_id == Task.id)
             .where(Task.phase_id == phase.id, Run.team_id == task.team_id, Run.state.in_(LIVE))
-        ).tuples()
+        )
     ]
     soonest = min(ends, default=None)
     return max(soonest, now) if soonest is not None else None

@@ -223,11 +223,12 @@ def schedule_phase(actor: Actor, phase: Phase) -> list[Task]:
     """Make the phase's tasks for every team that may enter it (those made before are kept)."""
     require_role(actor, Role.OFFICER, "schedule a phase")
     teams = entrants(phase)
-    have = set(
-        db.session.execute(
+    have = {
+        tuple(row)
+        for row in db.session.execute(
             select(Task.team_id, Task.world, Task.run_config).where(Task.phase_id == phase.id)
-        ).tuples()
-    )
+        )
+    }
     created = []
     for team in teams:
         for order, (world, config) in enumerate(phase.worlds, start=1):

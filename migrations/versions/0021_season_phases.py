@@ -44,7 +44,6 @@ def upgrade() -> None:
             ["entry_phase_id"],
             ["phases.id"],
             name=op.f("fk_phases_entry_phase_id_phases"),
-            ondelete="RESTRICT",
         ),
         sa.PrimaryKeyConstraint("id", name=op.f("pk_phases")),
         sa.UniqueConstraint("name", name=op.f("uq_phases_name")),
