@@ -11,10 +11,11 @@ if TYPE_CHECKING:
 
 
 def init_app(app: Flask) -> None:
-    """Register this feature's API with the app."""
+    """Register this feature's page and API with the app."""
     from cloudsim.api import register_api
-    from cloudsim.seasons import api
+    from cloudsim.seasons import api, views
 
+    app.register_blueprint(views.bp)
     register_api(app, api.blp)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from sqlalchemy import ColumnElement, and_, func, or_, select
+from sqlalchemy.orm import selectinload
 
 from cloudsim.audit.service import record
 from cloudsim.auth.policy import Actor, require_role
@@ -186,7 +187,8 @@ def find_phase(actor: Actor, name: str) -> Phase:
 
 def list_phases() -> list[Phase]:
     """Return the season's phases in order."""
-    return list(db.session.scalars(select(Phase).order_by(Phase.position, Phase.id)))
+    query = select(Phase).options(selectinload(Phase.entry_phase))
+    return list(db.session.scalars(query.order_by(Phase.position, Phase.id)))
 
 
 def phase_score(phase: Phase, team_id: int) -> int:

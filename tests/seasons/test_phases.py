@@ -13,7 +13,7 @@ from cloudsim.extensions import db
 from cloudsim.models import Phase, Run, RunState, Task, Team, User, Verification, utcnow
 from cloudsim.seasons import service
 from cloudsim.seasons.rules import RuleRefused, check_run_limits
-from tests.conftest import token_for
+from tests.conftest import csrf_token, log_in, token_for
 
 
 def _at(hours: float) -> str:
@@ -255,3 +255,33 @@ def test_the_ranking_leaves_out_unranked_phases_and_hidden_scores_until_revealed
     practice = service.find_phase(SYSTEM, "practice").id
     live = client.post(f"/api/v1/phases/{practice}/reveal", headers=officer)
     assert live.status_code == 409 and "shown live" in live.json["message"]
+
+
+def test_an_officer_imports_phases_and_reveals_scores_through_the_pages(
+    app: Flask, people: dict[str, User | None], team_a: Team, team_b: Team
+) -> None:
+    client = app.test_client()
+    log_in(client, people["officer"])  # type: ignore[arg-type]
+    page = client.get("/tasks").get_data(as_text=True)
+    imported = client.post(
+        "/tasks/import",
+        data={"csrf_token": csrf_token(page), "schedule_text": season()},
+        follow_redirects=True,
+    )
+    assert "Imported the schedule: 8 new task(s)." in imported.get_data(as_text=True)
+    page = client.get("/phases").get_data(as_text=True)
+    assert "teams with at least 2 point(s) in qualification" in page
+    assert "2 per task, 3 per day, 4 total, 1 at once" in page
+    qualification = service.find_phase(SYSTEM, "qualification").id
+    assert f'action="/phases/{qualification}/reveal"' in page
+    revealed = client.post(
+        f"/phases/{qualification}/reveal",
+        data={"csrf_token": csrf_token(page)},
+        follow_redirects=True,
+    )
+    assert "The scores of qualification are shown to the teams." in revealed.get_data(as_text=True)
+    assert f'action="/phases/{qualification}/reveal"' not in revealed.get_data(as_text=True)
+    team_page = app.test_client()
+    log_in(team_page, people["user_a"])  # type: ignore[arg-type]
+    seen = team_page.get("/phases").get_data(as_text=True)
+    assert "revealed" in seen and "Schedule its tasks" not in seen

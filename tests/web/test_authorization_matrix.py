@@ -130,6 +130,9 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("competition.settle", "POST"): (LOGIN, 403, 403, 400, 400),  # the form is empty
     ("competition.download", "GET"): (LOGIN, 200, 404, 200, 200),
     # the season's phases (a fresh phase, open now, scores hidden): everyone reads the rules
+    ("seasons.phases", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("seasons.schedule_phase", "POST"): (LOGIN, 403, 403, 302, 302),
+    ("seasons.reveal", "POST"): (LOGIN, 403, 403, 302, 302),
     ("api_seasons.Phases", "GET"): (401, 200, 200, 200, 200),
     ("api_seasons.PhaseById", "GET"): (401, 200, 200, 200, 200),
     ("api_seasons.SchedulePhase", "POST"): (401, 403, 403, 201, 201),
