@@ -9,7 +9,7 @@ from sqlalchemy import select
 from cloudsim.competition.schedule import in_zone
 from cloudsim.errors import Forbidden
 from cloudsim.extensions import db
-from cloudsim.models import Phase, Run, RunState, Task
+from cloudsim.models import Phase, Run, RunState, Task, Team
 
 LIVE = (RunState.STARTING, RunState.RUNNING, RunState.STOPPING)
 
@@ -37,6 +37,9 @@ def check_run_limits(task: Task, now: datetime) -> None:
     phase = task.phase
     if phase is None:
         return
+    # Two starts of one team at once would both count the runs before either is stored: on
+    # PostgreSQL the team's row lock makes the second wait and count again (SQLite ignores it).
+    db.session.execute(select(Team.id).where(Team.id == task.team_id).with_for_update())
     rows = db.session.execute(
         select(Task.world, Run.state, Run.started_at)
         .join(Task, Run.task_id == Task.id)
