@@ -95,7 +95,9 @@ def read_season(
     if not isinstance(document, dict) or not (
         isinstance(document.get("tasks"), list) or "phases" in document
     ):
-        raise InvalidInput("the schedule must be a mapping with a 'tasks' or 'phases' list")
+        raise InvalidInput(
+            "the schedule must be a mapping with a 'tasks' list, a 'phases' list or both"
+        )
     unknown = set(document) - {"time_zone", "teams", "tasks", "phases"}
     if unknown:
         raise InvalidInput(f"unknown schedule keys: {', '.join(sorted(map(str, unknown)))}")
