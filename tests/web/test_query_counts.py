@@ -58,7 +58,8 @@ def grow(team_a: Team, others: list[Team], people: dict[str, User], scale: int) 
     for user in people.values():
         add_credentials(user, scale)
     previous = None
-    for n in range(scale):  # phases, each entered through the one before (the phases' lists)
+    # phases, each entered through the one before: the newest always has an entry phase
+    for n in range(scale + 1):
         previous = Phase(
             name=f"phase-{scale}-{n}",
             window_start=utcnow(),
