@@ -25,6 +25,7 @@ FEATURES = (
     "cloudsim.launched_constellations",
     "cloudsim.providers",
     "cloudsim.competition",
+    "cloudsim.seasons",
     "cloudsim.viewer",
     "cloudsim.team_instances",
     "cloudsim.portal",

@@ -21,6 +21,11 @@ blp = Blueprint("api_competition", __name__, description="Tasks, runs, logs and 
 class TaskSchema(Schema):
     id = fields.Int(dump_only=True)
     team_id = fields.Int(dump_only=True)
+    phase_id = fields.Int(
+        dump_only=True,
+        allow_none=True,
+        metadata={"description": "the season's phase it was made from; null: scheduled by hand"},
+    )
     name = fields.Str()
     world = fields.Str()
     run_config = fields.Int()

@@ -20,6 +20,7 @@ from cloudsim.models import (
     Artifact,
     Constellation,
     ConstellationState,
+    Phase,
     Role,
     Run,
     RunState,
@@ -27,6 +28,8 @@ from cloudsim.models import (
     Team,
     utcnow,
 )
+from cloudsim.seasons.rules import check_run_limits
+from cloudsim.seasons.service import ranked_tasks
 from cloudsim.verification import service as verification
 from cloudsim.web.downloads import attachment
 
@@ -51,6 +54,7 @@ def start_run(actor: Actor, task_id: int, constellation_id: int | None = None) -
             f"the window of {task.name} closed at {task.window_stop:%Y-%m-%d %H:%M} UTC"
         )
     _refuse_if_run(task)
+    check_run_limits(task, now)
     constellation = _constellation_for(task, constellation_id)
     run = lifecycle.new_run(
         task_id=task.id,
@@ -205,8 +209,9 @@ def live_run(team_id: int) -> Run | None:
 
 def leaderboard(actor: Actor) -> list[Standing]:
     """Return the ranking of every team over their finished runs (not those an officer
-    invalidated nor those held for review; unverified ones as CLOUDSIM_RANK_UNVERIFIED says),
-    as much as the actor may see."""
+    invalidated nor those held for review; unverified ones as CLOUDSIM_RANK_UNVERIFIED says;
+    not those of a phase that does not count, nor, for teams, of one whose scores are still
+    hidden), as much as the actor may see."""
     config = current_app.config["CLOUDSIM"]
     policy = config.leaderboard_for_users
     team_user = actor is not None and not actor.has_role(Role.OFFICER)
@@ -228,10 +233,12 @@ def leaderboard(actor: Actor) -> list[Standing]:
             Task.timeout_s,
         )
         .join(Task, Run.task_id == Task.id)
+        .outerjoin(Phase, Task.phase_id == Phase.id)
         .where(
             Run.state == RunState.FINISHED,
             Run.invalidated_at.is_(None),
             verification.ranks(config),
+            ranked_tasks(team_user),
         )
     )
     for run in finished:

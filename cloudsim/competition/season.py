@@ -44,7 +44,9 @@ from cloudsim.competition.schedule import (
 from cloudsim.documents import BoundedLoader, load_document
 from cloudsim.errors import InvalidInput, NotFound
 from cloudsim.extensions import db
-from cloudsim.models import Role, Task, Team
+from cloudsim.models import Role, Task, Team, utcnow
+from cloudsim.seasons.document import parse_phases, phase_entries
+from cloudsim.seasons.service import PhaseSpec, list_phases, save_phase, schedule_phase
 
 MAX_TASKS = 1000
 # libyaml's emitter when PyYAML was built with it (its wheels are), else the pure-Python one
@@ -79,16 +81,32 @@ SeasonLoader.yaml_implicit_resolvers = {
 
 def parse_season(text: str) -> tuple[list[tuple[TaskSpec, list[str] | None]], str]:
     """Read a season document into (spec, team names or None for all) pairs and its zone."""
+    entries, _, zone_name = read_season(text)
+    return entries, zone_name
+
+
+def read_season(
+    text: str,
+) -> tuple[list[tuple[TaskSpec, list[str] | None]], list[PhaseSpec], str]:
+    """Read a season document into its task entries, its phases and its zone."""
     document = load_document(
         text, "the schedule", loader=SeasonLoader, not_parsed="{what} is not valid YAML"
     )
-    if not isinstance(document, dict) or not isinstance(document.get("tasks"), list):
-        raise InvalidInput("the schedule must be a mapping with a 'tasks' list")
-    unknown = set(document) - {"time_zone", "teams", "tasks"}
+    if not isinstance(document, dict) or not (
+        isinstance(document.get("tasks"), list) or "phases" in document
+    ):
+        raise InvalidInput(
+            "the schedule must be a mapping with a 'tasks' list, a 'phases' list or both"
+        )
+    unknown = set(document) - {"time_zone", "teams", "tasks", "phases"}
     if unknown:
         raise InvalidInput(f"unknown schedule keys: {', '.join(sorted(map(str, unknown)))}")
     zone_name = str(document.get("time_zone") or "UTC")
     zone(zone_name)
+    phases = parse_phases(document["phases"], zone_name) if "phases" in document else []
+    document.setdefault("tasks", [])
+    if not isinstance(document["tasks"], list):
+        raise InvalidInput("tasks must be a list")
     default_teams = _team_names(document.get("teams"), "teams")
     if len(document["tasks"]) > MAX_TASKS:
         raise InvalidInput(f"a schedule holds at most {MAX_TASKS} tasks")
@@ -98,7 +116,7 @@ def parse_season(text: str) -> tuple[list[tuple[TaskSpec, list[str] | None]], st
             entries.append(_entry(item, zone_name, default_teams))
         except InvalidInput as exc:
             raise InvalidInput(f"task {number}: {exc}") from None
-    return entries, zone_name
+    return entries, phases, zone_name
 
 
 def _entry(
@@ -151,9 +169,10 @@ def _team_names(value: Any, name: str) -> list[str] | None:
 
 
 def import_season(actor: Actor, text: str) -> list[Task]:
-    """Schedule every task of a season document; tasks already scheduled are left alone."""
+    """Save the document's phases and schedule every task of it (those of each phase for the
+    teams that may enter it now); tasks already scheduled are left alone."""
     require_role(actor, Role.OFFICER, "import schedules")
-    entries, _ = parse_season(text)
+    entries, phase_specs, _ = read_season(text)
     all_teams = list(db.session.scalars(select(Team).order_by(Team.name)))
     by_name = {t.name.lower(): t for t in all_teams}
     existing = {
@@ -178,7 +197,18 @@ def import_season(actor: Actor, text: str) -> list[Task]:
         if key not in existing:
             existing.add(key)
             created.append(add_task(actor, spec, team))
-    record("schedule.import", actor, tasks=len(entries), created=len(created))
+    for phase_spec in phase_specs:
+        phase = save_phase(actor, phase_spec)
+        if phase.entry_phase is None or phase.entry_phase.window_stop <= utcnow():
+            created += schedule_phase(actor, phase)
+        # else: its entrants are known once the earlier phase closes (`cloudsim phase schedule`)
+    record(
+        "schedule.import",
+        actor,
+        tasks=len(entries),
+        phases=len(phase_specs),
+        created=len(created),
+    )
     return created
 
 
@@ -186,10 +216,22 @@ def export_season(actor: Actor, zone_name: str | None = None) -> str:
     """Write every scheduled task as a season document (the same task for several teams once)."""
     require_role(actor, Role.OFFICER, "export schedules")
     columns = [getattr(Task, name) for name in SPEC_FIELDS]
-    tasks = visible_tasks(actor).with_only_columns(*columns, Team.name).join(Task.team)
+    tasks = (
+        visible_tasks(actor)
+        .with_only_columns(*columns, Team.name)
+        .join(Task.team)
+        .where(Task.phase_id.is_(None))  # a phase's tasks follow from the phase
+    )
     rows = tuple(tuple(row) for row in db.session.execute(tasks))
     all_names = tuple(sorted(db.session.scalars(select(Team.name))))
-    return _season_document(rows, all_names, zone_name)
+    text = _season_document(rows, all_names, zone_name)
+    phases = list_phases()
+    if not phases:
+        return text
+    entries = phase_entries(phases, _document_zone(rows, zone_name))
+    return text + yaml.dump(
+        {"phases": entries}, Dumper=SafeDumper, sort_keys=False, allow_unicode=True
+    )
 
 
 # Drawing a season's YAML costs ~50 ms (480 tasks), reading its rows ~3 ms: the document is
@@ -201,9 +243,7 @@ def _season_document(
     rows: tuple[tuple[Any, ...], ...], all_names: tuple[str, ...], zone_name: str | None
 ) -> str:
     """Draw the season document of these (spec fields..., team name) rows."""
-    zones = {row[SPEC_FIELDS.index("time_zone")] for row in rows}
-    document_zone = zone_name or (zones.pop() if len(zones) == 1 else "UTC")
-    zone(document_zone)
+    document_zone = _document_zone(rows, zone_name)
     groups: dict[tuple[Any, ...], list[str]] = defaultdict(list)
     for row in rows:
         groups[row[:-1]].append(row[-1])  # the spec's fields, then the team's name
@@ -215,6 +255,14 @@ def _season_document(
         entries.append(entry)
     document = {"time_zone": document_zone, "tasks": entries}
     return yaml.dump(document, Dumper=SafeDumper, sort_keys=False, allow_unicode=True)
+
+
+def _document_zone(rows: tuple[tuple[Any, ...], ...], zone_name: str | None) -> str:
+    """Return the zone the document is written in: the one asked for, or the tasks' own."""
+    zones = {row[SPEC_FIELDS.index("time_zone")] for row in rows}
+    document_zone = zone_name or (zones.pop() if len(zones) == 1 else "UTC")
+    zone(document_zone)
+    return document_zone
 
 
 SPEC_FIELDS = (

@@ -15,6 +15,7 @@ from cloudsim.models.machines import Constellation, ConstellationState, Machine,
 from cloudsim.models.notifications import EmailOptOut, RunNotice, Webhook, WebhookDelivery
 from cloudsim.models.people import ApiToken, LoginSession, Role, SshKey, Team, User
 from cloudsim.models.portal import PortalRefusal, PortalUpload, UploadState
+from cloudsim.models.seasons import Phase
 from cloudsim.models.secrets import Secret, SecretKind
 from cloudsim.models.team_instances import InstanceState, TeamInstance
 from cloudsim.models.worlds import World
@@ -33,6 +34,7 @@ __all__ = [
     "LoginSession",
     "Machine",
     "MachineState",
+    "Phase",
     "PortalRefusal",
     "PortalUpload",
     "Role",

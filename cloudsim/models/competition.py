@@ -15,6 +15,7 @@ if TYPE_CHECKING:
     from cloudsim.models.machines import Constellation
     from cloudsim.models.people import Team, User
     from cloudsim.models.portal import PortalUpload
+    from cloudsim.models.seasons import Phase
     from cloudsim.models.team_instances import TeamInstance
 
 
@@ -39,9 +40,13 @@ class Task(Base):
     time_zone: Mapped[str] = mapped_column(String(64), default="UTC")
     # on a team instance: the master's task this one copies ("m<id>"); None: made here
     master_key: Mapped[str | None] = mapped_column(String(32), unique=True)
+    # the season's phase this task was made from (cloudsim.seasons); None: scheduled by hand.
+    # No ON DELETE: a phase with tasks cannot be deleted (SQLite adds the column in place).
+    phase_id: Mapped[int | None] = mapped_column(ForeignKey("phases.id"), index=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
 
     team: Mapped[Team] = relationship()
+    phase: Mapped[Phase | None] = relationship()
     runs: Mapped[list[Run]] = relationship(back_populates="task")
 
     def __repr__(self) -> str:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Callable
+from datetime import timedelta
 
 import pytest
 from alembic.autogenerate import compare_metadata
@@ -16,9 +17,8 @@ from cloudsim.app import create_app
 from cloudsim.auth.policy import SYSTEM
 from cloudsim.config import Config
 from cloudsim.extensions import db
-from cloudsim.models import Base, Run, RunState, World
+from cloudsim.models import Base, Run, RunState, Task, World, utcnow
 from cloudsim.people.service import create_team
-from tests.competition.support import open_task
 from tests.support.servers import PostgresServer
 
 
@@ -55,12 +55,12 @@ def test_0012_ends_a_second_live_run_of_a_task_with_the_reason(
     migrate.upgrade(app, "0011")
     with app.app_context():
         team = create_team(SYSTEM, "Team A")
-        counted, raced = open_task(team.id), open_task(team.id)
+        counted, raced = _old_task(team.id), _old_task(team.id)
         rows = {
-            "finished": (counted.id, RunState.FINISHED),
-            "live after finished": (counted.id, RunState.RUNNING),
-            "first live": (raced.id, RunState.RUNNING),
-            "second live": (raced.id, RunState.STARTING),
+            "finished": (counted, RunState.FINISHED),
+            "live after finished": (counted, RunState.RUNNING),
+            "first live": (raced, RunState.RUNNING),
+            "second live": (raced, RunState.STARTING),
         }
         # the table as 0011 has it: only the columns named here (and those with defaults)
         ids = {
@@ -84,6 +84,30 @@ def test_0012_ends_a_second_live_run_of_a_task_with_the_reason(
         }
         assert "second live run of its task" in (states["second live"].error or "")
         db.engine.dispose()
+
+
+def _old_task(team_id: int) -> int:
+    """Add an open task with only the columns 0011's table has; return its id."""
+    now = utcnow()
+    return db.session.scalar(  # type: ignore[return-value]
+        insert(Task.__table__)
+        .values(
+            team_id=team_id,
+            name="Task",
+            world="vrc_task_2",
+            run_config=1,
+            window_start=now - timedelta(minutes=1),
+            window_stop=now + timedelta(minutes=30),
+            timeout_s=1800,
+            latency_ms=250,
+            uplink_bits=1_000_000,
+            downlink_bits=8_000_000,
+            order=0,
+            time_zone="UTC",
+            created_at=now,
+        )
+        .returning(Task.__table__.c.id)
+    )
 
 
 def _stored_world_becomes_shipped(

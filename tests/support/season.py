@@ -34,6 +34,7 @@ from cloudsim.models import (
     JobState,
     Machine,
     MachineState,
+    Phase,
     Role,
     Run,
     RunState,
@@ -289,6 +290,9 @@ def team_urls(app: Flask, team_id: int, endpoints: Iterable[str]) -> dict[str, s
         "artifact_id": run.artifacts[0].id,
         "name": "vrc_task_1",  # a world
     }
+    phase = db.session.scalar(select(Phase.id).order_by(Phase.id.desc()).limit(1))
+    if phase is not None:  # a season with phases
+        ids["phase_id"] = phase
     instance = db.session.scalar(select(TeamInstance.id).order_by(TeamInstance.id.desc()))
     if instance is not None:  # a season with team instances (their pages need one)
         ids["instance_id"] = instance

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable
+from datetime import timedelta
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,17 @@ from cloudsim.auth.ssh_keys import generate_key
 from cloudsim.auth.tokens import issue_token
 from cloudsim.extensions import db
 from cloudsim.jobs.service import enqueue
-from cloudsim.models import Constellation, ConstellationState, Role, Team, User, Webhook
+from cloudsim.models import (
+    Constellation,
+    ConstellationState,
+    Phase,
+    Role,
+    Team,
+    User,
+    Webhook,
+    utcnow,
+)
+from cloudsim.seasons.service import PhaseSpec, save_phase
 from cloudsim.team_instances import service as team_instances
 from tests.competition.support import finished_run, open_task, ready_constellation
 from tests.conftest import log_in, make_user, token_for
@@ -118,6 +129,14 @@ MATRIX: dict[tuple[str, str], tuple[int, ...]] = {
     ("competition.stop", "POST"): (LOGIN, 409, 404, 409, 409),  # it has finished
     ("competition.settle", "POST"): (LOGIN, 403, 403, 400, 400),  # the form is empty
     ("competition.download", "GET"): (LOGIN, 200, 404, 200, 200),
+    # the season's phases (a fresh phase, open now, scores hidden): everyone reads the rules
+    ("seasons.phases", "GET"): (LOGIN, 200, 200, 200, 200),
+    ("seasons.schedule_phase", "POST"): (LOGIN, 403, 403, 302, 302),
+    ("seasons.reveal", "POST"): (LOGIN, 403, 403, 302, 302),
+    ("api_seasons.Phases", "GET"): (401, 200, 200, 200, 200),
+    ("api_seasons.PhaseById", "GET"): (401, 200, 200, 200, 200),
+    ("api_seasons.SchedulePhase", "POST"): (401, 403, 403, 201, 201),
+    ("api_seasons.RevealPhase", "POST"): (401, 403, 403, 200, 200),
     # the portal (team A's page; its finished run has no bandwidth log: 404 for all)
     ("portal.index", "GET"): (LOGIN, 200, 200, 200, 200),
     ("portal.team", "GET"): (LOGIN, 200, 404, 200, 200),
@@ -311,6 +330,8 @@ def _url(
     if "name" in rule.arguments:
         # a provider's name, or a world's
         values["name"] = "servers" if endpoint.startswith("api_providers") else "vrc_task_1"
+    if "phase_id" in rule.arguments:
+        values["phase_id"] = _phase().id
     if "remote_run_id" in rule.arguments:
         values["remote_run_id"] = 1
     if "filename" in rule.arguments:
@@ -327,6 +348,21 @@ def _url(
         from flask import url_for
 
         return url_for(endpoint, **values)
+
+
+def _phase() -> Phase:
+    """Add a phase open now, with hidden scores, and commit it."""
+    now = utcnow()
+    spec = PhaseSpec(
+        name=f"phase {next(_seq)}",
+        window_start=now - timedelta(minutes=1),
+        window_stop=now + timedelta(hours=1),
+        worlds=(("vrc_task_1", 1),),
+        scores_hidden=True,
+    )
+    phase = save_phase(SYSTEM, spec)
+    db.session.commit()
+    return phase
 
 
 @pytest.mark.parametrize("persona", PERSONAS)

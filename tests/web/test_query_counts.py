@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
+from datetime import timedelta
 from typing import Any
 
 from flask import Flask, current_app
@@ -17,7 +18,16 @@ from sqlalchemy import event
 
 from cloudsim.competition.artifacts import LogStore
 from cloudsim.extensions import db
-from cloudsim.models import Constellation, Machine, Role, Team, TeamInstance, User
+from cloudsim.models import (
+    Constellation,
+    Machine,
+    Phase,
+    Role,
+    Team,
+    TeamInstance,
+    User,
+    utcnow,
+)
 from tests.conftest import log_in, make_user, token_for
 from tests.support.season import add_credentials, add_season, new_teams, team_urls
 from tests.web.test_authorization_matrix import MATRIX, PERSONAS
@@ -47,6 +57,20 @@ def grow(team_a: Team, others: list[Team], people: dict[str, User], scale: int) 
     add_season(store, teams, "x", users=scale, runs=scale, jobs=scale, events=4 * scale)
     for user in people.values():
         add_credentials(user, scale)
+    previous = None
+    # phases, each entered through the one before: the newest always has an entry phase
+    for n in range(scale + 1):
+        previous = Phase(
+            name=f"phase-{scale}-{n}",
+            window_start=utcnow(),
+            window_stop=utcnow() + timedelta(hours=1),
+            worlds=[["vrc_task_1", 1]],
+            uplink_bits=1,
+            downlink_bits=1,
+            entry_phase=previous,
+            entry_min_score=None if previous is None else 1,
+        )
+        db.session.add(previous)
     for n in range(scale):  # team instances (admins' page and list), with their machines
         constellation = Constellation(name=f"ti-{scale}-{n}", kind="cloudsim", provider="local")
         constellation.machines.append(Machine(name="server", role="cloudsim"))
