@@ -33,14 +33,16 @@ from cloudsim.launched_constellations.connect import (
     targets,
 )
 from cloudsim.launched_constellations.keys import (
+    SSH_KEY_NAME,
     KeyPair,
     constellation_keypair,
+    constellation_secret,
 )
 from cloudsim.launched_constellations.lifecycle import ConstellationJob
 from cloudsim.launched_constellations.service import launched_kind
 from cloudsim.launched_constellations.software import Supply, preinstall, supply_needs
 from cloudsim.launched_constellations.verify import VerificationFailed, verify_constellation
-from cloudsim.models import Constellation, ConstellationState, Secret
+from cloudsim.models import Constellation, ConstellationState, Secret, SecretKind
 from cloudsim.models.machines import GONE
 from cloudsim.providers.service import Provider, open_provider
 from constellations.definition import ConstellationKind
@@ -79,15 +81,21 @@ def launch_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     kind = launched_kind(constellation)
     lifecycle.launching(constellation)
     deployed = _team_access(constellation)  # the install below deploys these, or newer ones
+    # kept in memory: a terminate that ends before this job stops deletes the stored key, and
+    # what this job made since is reached (and cleaned) with it
+    keys: KeyPair | None = None
     try:
-        _launch(ctx, constellation, kind, config)
+        ctx.stage("keys", 2)
+        keys = constellation_keypair(constellation)
+        ctx.checkpoint()  # made once and kept before the provider is asked for anything
+        _launch(ctx, constellation, kind, keys, config)
         ctx.check()  # the last step: a terminate asked before it wins
     except Exception as exc:
         db.session.rollback()
         if (reason := ctx.cancelled()) is not None:
             # the terminate owns the constellation now: write nothing, leave nothing behind
             ctx.log(f"stopped: {reason}")
-            _release_if_terminated(ctx, job.constellation_id, config)
+            _release_if_terminated(ctx, job.constellation_id, config, keys)
             raise JobCancelled(f"cancelled: {reason}") from exc
         constellation = ctx.load(Constellation, job.constellation_id)
         if lifecycle.failed(
@@ -115,30 +123,62 @@ def launch_error_code(exc: BaseException) -> str:
     return LAUNCH_FAILED
 
 
-def _release_if_terminated(ctx: JobContext, constellation_id: int, config: Config) -> None:
-    """Destroy what a cancelled launch made when the terminate finished before it stopped
+def _release_if_terminated(
+    ctx: JobContext, constellation_id: int, config: Config, keys: KeyPair | None
+) -> None:
+    """Release what a cancelled launch made when the terminate finished before it stopped
     (it did not wait long enough): its machines and network must not outlive it."""
     db.session.expire_all()
     constellation = ctx.load(Constellation, constellation_id)
     if constellation.state != ConstellationState.TERMINATED:
         return  # the terminate job still runs: it releases everything once this job ends
     provider = open_provider(constellation.provider, config)
-    released = release(ctx, provider, constellation.name)
-    ctx.log(f"the terminate had already ended: released {released} machine(s) made since")
+    release_made_since(ctx, constellation, provider, keys, config)
+    # not ctx.checkpoint(), which refuses a cancelled job's changes: this is the terminate's
+    # own outcome (an incomplete release), which must survive the runner's rollback
+    db.session.commit()
 
 
-def release(ctx: JobContext, provider: Provider, name: str) -> int:
-    """Destroy a constellation's machines and network at the provider; return how many
-    machines there were."""
+def release_made_since(
+    ctx: JobContext,
+    constellation: Constellation,
+    provider: Provider,
+    keys: KeyPair | None,
+    config: Config,
+) -> None:
+    """Clean and release the machines and network of a terminated constellation that a
+    cancelled launch made after its terminate ended, as the terminate does: each machine
+    through its stored route with the launch's key (the terminate deleted the stored one).
+
+    A machine not cleaned turns the constellation `terminate_incomplete` with the reason,
+    and the key is stored again, so that the retry of terminate reaches it.
+    """
+    nodes = provider.nodes(constellation.name)
+    if not nodes:
+        not_cleaned: dict[str, str] = {}
+    elif keys is None:
+        # this job stopped before it had the key, so it made none of them: nothing reaches them
+        not_cleaned = {node.name: "no key to reach it" for node in nodes}
+    else:
+        not_cleaned = _destroy_machines(
+            ctx, constellation, provider, nodes, config, keys, db.session.commit
+        )
+    if not_cleaned:
+        reason = ctx.masked("; ".join(f"{n}: {why}" for n, why in sorted(not_cleaned.items())))
+        if keys is not None:
+            private = keys.private
+            constellation_secret(
+                constellation, SSH_KEY_NAME, SecretKind.SSH_PRIVATE_KEY, lambda: private
+            )
+        lifecycle.terminate_incomplete(constellation, reason)
+        ctx.log(f"the terminate had already ended; what was made since is not released: {reason}")
+        return
     driver = provider.driver
-    nodes = provider.nodes(name)
-    _in_parallel(nodes, lambda node: driver.destroy_node(node), lambda node: node.name)
-    ctx.log(f"destroyed {len(nodes)} machine(s)")
-    network = {n.name: n for n in driver.ex_list_networks()}.get(name)
+    network = {n.name: n for n in driver.ex_list_networks()}.get(constellation.name)
     if network is not None:
         driver.ex_destroy_network(network)
         ctx.log(f"destroyed network {network.name}")
-    return len(nodes)
+    ctx.log(f"the terminate had already ended: released {len(nodes)} machine(s) made since")
 
 
 def _team_access(constellation: Constellation) -> tuple[tuple[MemberAccount, ...], bool]:
@@ -147,11 +187,12 @@ def _team_access(constellation: Constellation) -> tuple[tuple[MemberAccount, ...
 
 
 def _launch(
-    ctx: JobContext, constellation: Constellation, kind: ConstellationKind, config: Config
+    ctx: JobContext,
+    constellation: Constellation,
+    kind: ConstellationKind,
+    keys: KeyPair,
+    config: Config,
 ) -> None:
-    ctx.stage("keys", 2)
-    keys = constellation_keypair(constellation)
-    ctx.checkpoint()  # made once and kept before the provider is asked for anything
     provider = open_provider(constellation.provider, config)
     driver = provider.driver
     ctx.stage("network", 5)
@@ -443,7 +484,15 @@ def terminate_constellation(ctx: JobContext, job: ConstellationJob) -> None:
     provider = open_provider(constellation.provider, config)
     driver = provider.driver
     nodes = provider.nodes(constellation.name)
-    not_cleaned = _destroy_machines(ctx, constellation, provider, nodes, config)
+    not_cleaned = _destroy_machines(
+        ctx,
+        constellation,
+        provider,
+        nodes,
+        config,
+        constellation_keypair(constellation),
+        ctx.checkpoint,
+    )
     forget_connections(constellation)
     if not_cleaned:
         reason = "; ".join(f"{name}: {why}" for name, why in sorted(not_cleaned.items()))
@@ -470,6 +519,8 @@ def _destroy_machines(
     provider: Provider,
     nodes: list[Node],
     config: Config,
+    keys: KeyPair,
+    commit: Callable[[], None],
 ) -> dict[str, str]:
     """Destroy the nodes, each cleaned through the route a launch uses; return machine -> why
     it is not destroyed.
@@ -479,7 +530,6 @@ def _destroy_machines(
     """
     if not nodes:
         return {}
-    keys = constellation_keypair(constellation)
     reach = targets(constellation, keys, config)
     jumps = {t.jump.name for t in reach.values() if t.jump is not None}
 
@@ -489,7 +539,7 @@ def _destroy_machines(
     behind = [n for n in nodes if target_name(constellation, machine(n)) not in jumps]
     gateways = [n for n in nodes if target_name(constellation, machine(n)) in jumps]
     host_keys = machine_host_keys(constellation)
-    ctx.checkpoint()  # the machines' threads record host keys and log lines meanwhile
+    commit()  # the machines' threads record host keys and log lines meanwhile
     executor = SSHExecutor(
         host_keys,
         log_sink=ctx.line_sink(),

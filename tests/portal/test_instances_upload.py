@@ -39,7 +39,8 @@ from tests.support.relay import relay
 from tests.support.servers import free_port, wait_for
 from tests.team_instances.test_local_instances import on_instance, ready
 
-pytestmark = pytest.mark.hosts
+# two team instances, two launches through them (each waited for up to 15 minutes), two runs
+pytestmark = [pytest.mark.hosts, pytest.mark.timeout(3000)]
 PREFIX = f"tp{os.getpid() % 100000}"
 GATEWAY = "198.18.19.1"  # the public network's gateway: the master's portal, for the instances
 
@@ -60,9 +61,10 @@ def _launched(config: Config, instances: list[TeamInstance]) -> list[dict[str, A
 
 
 @pytest.mark.skip(
-    reason="known failure on the merged tree, not yet located: the two team instances' simple "
-    "constellations on the servers provider end in error (the servers routes changed in the "
-    "same round); issue 26 notes it"
+    reason="known failure, cause found: each team instance's own CloudSim verifies its simple "
+    "constellation's simulator at production's CLOUDSIM_SIM_MIN_RTF (1.0), and on this loaded "
+    "machine it ran at 0.23-0.28, so both launches end in error (verify); the master has no "
+    "way yet to give its instances the test's (or its own) minimum real-time factor"
 )
 def test_two_instances_runs_reach_the_portal_and_are_ranked(
     constellations_app: Flask,  # noqa: F811 (the fixture)
@@ -134,7 +136,9 @@ def test_two_instances_runs_reach_the_portal_and_are_ranked(
             list[dict[str, Any]],
             wait_for(lambda: _launched(config, instances), 900, "both launches"),
         )
-        assert [launch["state"] for launch in launches] == ["ready", "ready"], launches
+        assert [launch["state"] for launch in launches] == ["ready", "ready"], [
+            (launch["state"], launch.get("error")) for launch in launches
+        ]
         with relay(f"{PREFIX}-s-public", (GATEWAY, port), port):
             remote_runs = {}
             for instance in instances:  # the master's task, as the instance has it

@@ -21,6 +21,10 @@ class ConnectError(SSHError):
     """Raise when a machine cannot be reached or authenticated within the deadline."""
 
 
+class ConnectionLost(SSHError):
+    """Raise when a machine's connection broke while a command ran (its result is unknown)."""
+
+
 class HostKeyMismatch(SSHError):
     """Raise when a machine presents a host key other than the one recorded at first contact."""
 

@@ -19,7 +19,13 @@ import paramiko
 
 from provisioners.remote.ssh.cache import ConnectionCache
 from provisioners.remote.ssh.connections import ConnectionPool, ConnectPolicy, Interrupt
-from provisioners.remote.ssh.errors import CommandFailed, CommandTimeout, GroupError, SSHError
+from provisioners.remote.ssh.errors import (
+    CommandFailed,
+    CommandTimeout,
+    ConnectionLost,
+    GroupError,
+    SSHError,
+)
 from provisioners.remote.ssh.hostkeys import HostKeyStore
 from provisioners.remote.ssh.output import LineStream, LogSink, SecretMasker
 from provisioners.remote.ssh.result import CommandResult, Transfer
@@ -95,9 +101,14 @@ class SSHExecutor:
             raise ValueError("timeout must be positive")
         self._pool.check(machine)
         self.log(machine.name, f"$ {'sudo ' if sudo else ''}{command}")
-        # the remote `timeout` kills the whole process group, so nothing outlives a timeout
+        # the remote `timeout` kills the whole process group, so nothing outlives a timeout;
+        # stdin is /dev/null (like `ssh -n`): a command that reads it ends instead of hanging.
+        # Never paramiko's shutdown_write(): its EOF, sent outside the channel's lock, can
+        # follow the CLOSE its reader thread sends for a command that already ended, and
+        # OpenSSH then drops the whole connection, with every machine a jump host carries.
         remote = (
-            f"timeout --kill-after={_KILL_AFTER_SECONDS} {timeout:g} sh -c {shlex.quote(command)}"
+            f"timeout --kill-after={_KILL_AFTER_SECONDS} {timeout:g} "
+            f"sh -c {shlex.quote(command)} < /dev/null"
         )
         if sudo:
             remote = f"sudo -n -- {remote}"
@@ -105,8 +116,6 @@ class SSHExecutor:
         channel = self._open_session(machine)
         try:
             channel.exec_command(remote)
-            # like `ssh -n`: a command that reads stdin gets EOF instead of hanging to its timeout
-            channel.shutdown_write()
             result = self._collect(machine, channel, command, started, timeout)
         finally:
             channel.close()
@@ -244,6 +253,14 @@ class SSHExecutor:
         stdout = LineStream(lambda line: self.log(machine.name, line))
         stderr = LineStream(lambda line: self.log(machine.name, f"! {line}"))
         while not channel.eof_received:
+            if channel.closed:
+                if channel.exit_status == -1:
+                    # closed with neither an end of output nor a status: the connection (or
+                    # its jump host's) broke, and waiting to the deadline would change nothing
+                    raise ConnectionLost(
+                        f"{machine.name}: connection lost while running: {self._mask(command)}"
+                    )
+                break
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise CommandTimeout(machine.name, self._mask(command), timeout)

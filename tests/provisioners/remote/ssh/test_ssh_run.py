@@ -2,19 +2,25 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import threading
 import uuid
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
+import paramiko
 import pytest
 
 from provisioners.remote.ssh import (
     CommandFailed,
     CommandTimeout,
     ConnectError,
+    ConnectionLost,
     ConnectPolicy,
     HostKeys,
+    SSHError,
     SSHExecutor,
     SSHTarget,
 )
@@ -199,3 +205,74 @@ def test_run_parallel_group_error_carries_every_machine_outcome(
     assert "bad" in str(group.value)
     outcomes = executor.run_parallel(machines, task, raise_on_error=False)
     assert outcomes["good"] == "" and isinstance(outcomes["bad"], CommandFailed)
+
+
+def test_a_command_ending_before_its_input_is_closed_keeps_the_connection(
+    executor: SSHExecutor,
+    sshd: SshServer,
+    make_machine: Callable[..., SSHTarget],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """No end-of-input sent after the channel's close: OpenSSH would drop the connection.
+
+    paramiko sends an EOF asked by the caller outside the channel's lock, so its reader
+    thread can close the channel of a command that already ended first. On a loaded machine
+    that happened on a router carrying sim's and the field computers' channels, and all of
+    them broke. Here every EOF the caller's thread sends waits for that close, as it can
+    (a command reading its input would wait for good: test_command_reading_stdin_... covers
+    those).
+    """
+    machine = make_machine(sshd)
+    send = paramiko.Transport._send_user_message
+
+    def eof_after_the_reader(transport: paramiko.Transport, data: Any) -> None:
+        raw = data.asbytes()
+        if (
+            raw[:1] == paramiko.common.cMSG_CHANNEL_EOF
+            and threading.current_thread() is not transport
+        ):
+            remote_id = int.from_bytes(raw[1:5], "big")
+            channels = [c for c in transport._channels.values() if c.remote_chanid == remote_id]
+            for channel in channels:
+                wait_until(_closed(channel), 10, "the reader to close the channel")
+        send(transport, data)
+
+    monkeypatch.setattr(paramiko.Transport, "_send_user_message", eof_after_the_reader)
+    for n in range(3):
+        assert executor.run(machine, f"echo {n}").stdout == f"{n}\n"
+    sshd_log = (sshd.workdir / "sshd.log").read_text()
+    assert "nonexistent channel" not in sshd_log
+    assert sshd_log.count("Accepted publickey") == 1, sshd_log[-2000:]
+
+
+def test_a_connection_broken_while_a_command_runs_fails_it_at_once(
+    executor: SSHExecutor,
+    sshd: SshServer,
+    make_machine: Callable[..., SSHTarget],
+    log: LogRecorder,
+    tmp_path: Path,
+) -> None:
+    """A command whose connection broke fails then, not at its timeout (it cannot finish)."""
+    pid_file = tmp_path / "proxy.pid"
+    proxy = f"echo $$ > {pid_file}; exec socat STDIO TCP:127.0.0.1:{sshd.port}"
+    machine = make_machine(sshd, proxy_command=["sh", "-c", proxy])
+    outcome: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            executor.run(machine, "echo started; sleep 3", timeout=60)
+        except SSHError as exc:
+            outcome.append(exc)
+
+    runner = threading.Thread(target=run)
+    runner.start()
+    wait_until(lambda: "started" in log.text(machine.name).splitlines(), 20, "its output")
+    os.kill(int(pid_file.read_text()), signal.SIGKILL)  # the way to the machine breaks
+    runner.join(30)
+    assert not runner.is_alive()
+    assert [type(e) for e in outcome] == [ConnectionLost], outcome
+    assert "connection lost while running: echo started; sleep 3" in str(outcome[0])
+
+
+def _closed(channel: paramiko.Channel) -> Callable[[], bool]:
+    return lambda: bool(channel.closed)
