@@ -427,6 +427,7 @@ def _plan_context(
         addresses={m.name: m.private_ip or "" for m in constellation.machines},
         members=team_members(constellation.team_id) if field_computer else (),
         team_sudo=constellation.team_sudo,
+        sim_min_rtf=config.sim_min_rtf,
     )
 
 

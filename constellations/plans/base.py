@@ -118,6 +118,9 @@ class PlanContext:
     vpn: VpnMaterial | None = None  # routers only
     router_wheelhouse: Path | None = None  # routers with a VPN: csrouter and its wheels
     app_bundle: Path | None = None  # CloudSim servers only: source + wheels
+    # CloudSim servers only: the real-time factor the competition needs, handed down by the
+    # master so that its instances verify simulators against the same figure
+    sim_min_rtf: float = 1.0
     secrets: Mapping[str, str] = field(default_factory=dict, repr=False)
     members: tuple[MemberAccount, ...] = ()  # field computers: the team's active members
     team_sudo: bool = False  # field computers: may the members use sudo

@@ -59,6 +59,7 @@ def cloudsim_server(ctx: PlanContext) -> list[PlanItem]:
             "admin_token": ctx.secrets["cloudsim_admin_token"],
             "tls_cert": CLOUDSIM_TLS_CERT,
             "tls_key": CLOUDSIM_TLS_KEY,
+            "sim_min_rtf": ctx.sim_min_rtf,
             # the wheels it was installed with: its own launches build theirs from them
             "wheels": f"{REMOTE_ROOT}/{ctx.app_bundle.name}",
         },

@@ -60,12 +60,6 @@ def _launched(config: Config, instances: list[TeamInstance]) -> list[dict[str, A
     return launches if done else None
 
 
-@pytest.mark.skip(
-    reason="known failure, cause found: each team instance's own CloudSim verifies its simple "
-    "constellation's simulator at production's CLOUDSIM_SIM_MIN_RTF (1.0), and on this loaded "
-    "machine it ran at 0.23-0.28, so both launches end in error (verify); the master has no "
-    "way yet to give its instances the test's (or its own) minimum real-time factor"
-)
 def test_two_instances_runs_reach_the_portal_and_are_ranked(
     constellations_app: Flask,  # noqa: F811 (the fixture)
     constellations_worker: None,  # noqa: F811
