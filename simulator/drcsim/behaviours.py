@@ -21,7 +21,9 @@ from drcsim.walker import Walker
 
 GAIT_KEYS = ("step_length", "step_height", "step_time", "double_support", "stance_width")
 LEG_JOINTS = [s.name for s in humanoid.BODY_JOINTS if "_leg_" in s.name]
-TRUNK_JOINTS = ["back_bkz", "back_bky", "back_bkx", "neck_ry"]
+# The neck is the team's even while the walker holds the body (as BDI's library left Atlas's
+# neck and arms to the user): pointing the head is how a team looks around.
+TRUNK_JOINTS = ["back_bkz", "back_bky", "back_bkx"]
 # What a fallen robot may still be told: let go of its joints, arms and hands.
 WHILE_DOWN = ("none", "arm_rest", "release")
 

@@ -153,3 +153,16 @@ def _live_once(folder: Path, wanted: Callable[[dict[str, Any]], bool]) -> dict[s
             return figures
         time.sleep(0.1)  # polling a file the simulator rewrites: nothing to await
     raise AssertionError(f"{folder / LIVE} never showed the wanted figures")
+
+
+def test_the_readmes_client_example_runs_as_written(server: ServerFactory) -> None:
+    _, port = server("vrc_task_2", "1")
+    with SimClient("127.0.0.1", port) as sim:
+        info = sim.hello()
+        sim.subscribe("imu", "joint_states")
+        assert sim.behaviour("walk", pose=[4.0, 0.0, 0.0])["ok"]
+        sim.joints(position={"neck_ry": 0.3})  # the neck is the team's while the walker walks
+        state = sim.step(1000)
+    neck = [j["name"] for j in info["joints"]].index("neck_ry")
+    assert abs(state["joints"]["position"][neck] - 0.3) < 0.05
+    assert state["behaviour"]["mode"] == "walk" and state["score"]["falls"] == 0
