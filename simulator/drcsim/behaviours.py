@@ -186,7 +186,7 @@ class Behaviours:
             return
         gait = {k: float(params[k]) for k in GAIT_KEYS if k in params}
         goal = params["pose"]
-        self.walker.walk_to((goal[0], goal[1], goal[2]), GaitParameters(**gait))
+        self.walker.redirect((goal[0], goal[1], goal[2]), GaitParameters(**gait))
         self.mode, self.walk_status = "walk", "walking"
 
     def fall(self) -> None:
