@@ -21,7 +21,11 @@ from drcsim.walker import Walker
 
 GAIT_KEYS = ("step_length", "step_height", "step_time", "double_support", "stance_width")
 LEG_JOINTS = [s.name for s in humanoid.BODY_JOINTS if "_leg_" in s.name]
-TRUNK_JOINTS = ["back_bkz", "back_bky", "back_bkx", "neck_ry"]
+# The neck is the team's even while the walker holds the body (as BDI's library left Atlas's
+# neck and arms to the user): pointing the head is how a team looks around.
+TRUNK_JOINTS = ["back_bkz", "back_bky", "back_bkx"]
+# What a fallen robot may still be told: let go of its joints, arms and hands.
+WHILE_DOWN = ("none", "arm_rest", "release")
 
 
 class Behaviours:
@@ -83,6 +87,11 @@ class Behaviours:
         """Start behaviour `name`; return details for the reply; raise CommandError if refused."""
         if self.seat.seated and name in ("stand", "walk", "none"):
             raise CommandError(f"{name} is not possible in the vehicle (exit_vehicle first)")
+        if fallen and name not in WHILE_DOWN:
+            raise CommandError(
+                f"{name} is not possible: the robot is down (drcsim offers no get-up, nor did "
+                "the VRC's behaviour library); only the team's own joint commands can stand it up"
+            )
         if name == "none":
             self._release_legs()
             self.mode = "none"
@@ -169,31 +178,27 @@ class Behaviours:
 
     def _balance(self, name: str, params: dict[str, Any], fallen: bool) -> None:
         """Stand or walk with the walker: only the leg joints hold the robot up."""
-        if fallen:
-            self._recover()
         # Standing takes the robot as it stands now (it may have been moved: the seat, a
         # team's own joint control); a walk in progress is not cut off mid-step.
-        self._hand_to_walker(reset=fallen or self.walker.status != "walking")
+        self._hand_to_walker(reset=self.walker.status != "walking")
         if name == "stand":
             self.mode, self.walk_status = "stand", "idle"
             return
         gait = {k: float(params[k]) for k in GAIT_KEYS if k in params}
         goal = params["pose"]
-        self.walker.walk_to((goal[0], goal[1], goal[2]), GaitParameters(**gait))
+        self.walker.redirect((goal[0], goal[1], goal[2]), GaitParameters(**gait))
         self.mode, self.walk_status = "walk", "walking"
 
-    def _recover(self) -> None:
-        """Recovery assist: stand a fallen robot up where it lies (the same for every team)."""
-        client, robot = self.client, self.scene.robot
-        pos, orn = client.getBasePositionAndOrientation(robot)
-        yaw = client.getEulerFromQuaternion(orn)[2]
-        z = humanoid.STAND_PELVIS_HEIGHT + self.scene.ground_height(pos[0], pos[1])
-        client.resetBasePositionAndOrientation(
-            robot, [pos[0], pos[1], z], client.getQuaternionFromEuler([0, 0, yaw])
-        )
-        client.resetBaseVelocity(robot, [0, 0, 0], [0, 0, 0])
-        self.controller.reset_to(humanoid.STAND_POSTURE)
+    def fall(self) -> None:
+        """Stop every behaviour: the robot is down (a fall ends what it was doing)."""
+        self.valve.cancel()
+        self.driver.stop()
         self.reaches.clear()
+        if self.mode == "walk":
+            self.walk_status = f"fell ({self.walk_status})"
+        if self.mode != "seated":
+            self._release_legs()
+            self.mode = "none"
 
     # -- per step -------------------------------------------------------------------------
     def apply(self) -> None:

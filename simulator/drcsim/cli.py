@@ -73,6 +73,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
                 "sim_time": sim.sim_time,
                 "rejected": server.stats.rejected,
                 "refused": server.stats.refused,
+                "dropped": server.stats.dropped,
             }
         )
     )

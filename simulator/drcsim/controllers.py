@@ -19,7 +19,6 @@ class NaiveController(ExampleController):
     search = [(0.0, 0.0)]
     grasp_search = [(0.0, 0.0)]
     straight = True
-    walk_tries = 1  # no recovery: down is out
     approach_tries = 0
     # Faster than the walker's defaults (0.25 m, 0.6 s, 0.3 s): long, quick steps.
     gait = {"step_time": 0.4, "double_support": 0.1, "step_length": 0.4}
@@ -31,7 +30,6 @@ class CarefulController(ExampleController):
     throttle = 0.45
     steer_gain = 8.0
     walk_past = 1.2
-    walk_tries = 3
     approach_tries = 3
     avoid = ("rubble",)
     # Slower and shorter than the walker's defaults (0.25 m, 0.6 s, 0.3 s).

@@ -179,6 +179,8 @@ class Simulation:
         tilt = math.acos(max(-1.0, min(1.0, matrix[8])))
         height = pos[2] - self.scene.ground_height(pos[0], pos[1])
         events = self.scorer.update(self.sim_time, self.observation(), height, tilt)
+        if any(event["event"] == "fall" for event in events):
+            self.behaviours.fall()
         if self.log is not None:
             self.log.state(self.step_count, self.sim_time, self.state_vector())
         if self.recorder is not None:

@@ -16,6 +16,8 @@ class CommandError(DrcsimError):
 class ProtocolError(DrcsimError):
     """A network message is malformed, oversized or not allowed."""
 
+    request_id: int | None = None  # the refused message's id, when it had a readable one
+
 
 class ClientError(DrcsimError):
     """The client library could not talk to the server."""

@@ -127,7 +127,6 @@ class ExampleController:
     walk_past = 1.0
     search = SEARCH
     grasp_search = GRASP_SEARCH
-    walk_tries = 2  # walks after a fall before giving up (1: no recovery)
     approach_tries = 2  # walks again when a walk ends short of its goal
     straight = False  # True: straight at every goal (also the door), no backing-away legs
     avoid: tuple[str, ...] = ()  # kinds of terrain (the briefing's) walked round in task 2
@@ -193,8 +192,8 @@ class ExampleController:
     def walk(
         self, x: float, y: float, yaw: float, limit_s: float | None = None, **gait: float
     ) -> dict[str, Any]:
-        """Walk to a pose; after a fall get up (or give up), after a short stop walk again."""
-        recoveries, approaches = self.walk_tries - 1, self.approach_tries
+        """Walk to a pose; after a short stop walk again; after a fall give up (no get-up)."""
+        approaches = self.approach_tries
         while True:
             state = self.client.state()
             falls = state["score"]["falls"]
@@ -210,13 +209,7 @@ class ExampleController:
             if state["score"]["ended"]:
                 return state
             if state["score"]["falls"] > falls:
-                if recoveries <= 0:
-                    raise Down(f"fell walking to {x:.2f} {y:.2f} and does not get up")
-                recoveries -= 1
-                self.log(f"fell walking to {x:.2f} {y:.2f}: getting up")
-                self.client.behaviour("stand")  # the recovery assist
-                self.advance(1.0)
-                continue
+                raise Down(f"fell walking to {x:.2f} {y:.2f} and does not get up")
             status = str(state["behaviour"]["walk"])
             if status == "done" or approaches <= 0:
                 return state
@@ -292,9 +285,12 @@ class ExampleController:
         except Down as exc:
             self.gave_up = str(exc)
             self.log(f"gave up: {exc}")
-        except ClientError:
+        except ClientError as exc:
+            if "the robot is down" in str(exc):  # it fell doing something else than walking
+                self.gave_up = f"fell and does not get up ({exc})"
+                self.log(f"gave up: {self.gave_up}")
             # A real failure, not a command refused (or the server going away) after the end.
-            if self.final_score is None and not self.client.state()["score"]["ended"]:
+            elif self.final_score is None and not self.client.state()["score"]["ended"]:
                 raise
         if self.final_score is None:
             self.final_score = dict(self.client.state()["score"])

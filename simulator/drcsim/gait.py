@@ -185,15 +185,26 @@ class GaitParameters:
     pelvis_height: float = 0.89  # m above the feet
 
     def checked(self) -> GaitParameters:
-        """Return the parameters clamped to what the legs can do."""
-        return GaitParameters(
-            min(max(self.step_length, 0.02), 0.5),
-            min(max(self.step_height, 0.01), 0.2),
-            min(max(self.step_time, 0.3), 2.0),
-            min(max(self.double_support, 0.05), 1.0),
-            min(max(self.stance_width, 0.12), 0.4),
-            min(max(self.pelvis_height, 0.75), 0.93),
-        )
+        """Return the parameters; raise ValueError for one the legs cannot do.
+
+        The command channel refuses a team's value outside these ranges (protocol.RANGES)
+        before it gets here; this guards the walker's own callers.
+        """
+        for name, low, high in _GAIT_RANGES:
+            value = getattr(self, name)
+            if not low <= value <= high:
+                raise ValueError(f"{name} must be in {low:g}..{high:g}, not {value:g}")
+        return self
+
+
+_GAIT_RANGES = (
+    ("step_length", 0.02, 0.5),
+    ("step_height", 0.01, 0.2),
+    ("step_time", 0.3, 2.0),
+    ("double_support", 0.05, 1.0),
+    ("stance_width", 0.12, 0.4),
+    ("pelvis_height", 0.75, 0.93),
+)
 
 
 @dataclass

@@ -9,7 +9,7 @@ import msgpack
 
 from drcsim.driving import DIRECTIONS
 from drcsim.errors import ProtocolError
-from drcsim.models.humanoid import JOINT_NAMES
+from drcsim.models.humanoid import ALL_JOINTS, JOINT_NAMES
 
 MAX_MESSAGE_BYTES = 64 * 1024
 MAX_STEPS = 10_000
@@ -44,6 +44,27 @@ BEHAVIOURS: dict[str, dict[str, str]] = {
     "turn_valve": {"hand": "hand", "angle": "float?"},
 }
 _KNOWN_JOINTS = frozenset(JOINT_NAMES)
+# The documented range of each numeric behaviour parameter: a value outside it is refused
+# with the range, never clamped (a team must learn that its step_length of 100 is no gait).
+RANGES: dict[str, tuple[float, float, str]] = {
+    "walk.step_length": (0.02, 0.5, "m"),
+    "walk.step_height": (0.01, 0.2, "m"),
+    "walk.step_time": (0.3, 2.0, "s"),
+    "walk.double_support": (0.05, 1.0, "s"),
+    "walk.stance_width": (0.12, 0.4, "m"),
+    "drive.steering_wheel": (-3.0, 3.0, "rad"),
+    "drive.throttle": (0.0, 1.0, ""),
+    "drive.brake": (0.0, 1.0, ""),
+    "turn_valve.angle": (-4 * math.pi, 4 * math.pi, "rad"),
+}
+JOINT_RANGES = {spec.name: (spec.lower, spec.upper) for spec in ALL_JOINTS}
+
+
+def _in_range(value: float, where: str, low: float, high: float, unit: str = "") -> float:
+    if not low <= value <= high:
+        unit = f" {unit}" if unit else ""
+        raise ProtocolError(f"{where} must be in {low:g}..{high:g}{unit}, not {value:g}")
+    return value
 
 
 def _finite(value: Any, where: str) -> float:
@@ -86,6 +107,8 @@ def _joint_map(value: Any, where: str, arity: int = 1) -> dict[str, Any]:
             raise ProtocolError(f"{where}: unknown joint {name!r}")
         if arity == 1:
             checked[name] = _finite(item, f"{where}.{name}")
+            if where == "position":
+                checked[name] = _in_range(checked[name], f"position.{name}", *JOINT_RANGES[name])
         else:
             if not isinstance(item, list | tuple) or len(item) != arity:
                 raise ProtocolError(f"{where}.{name} must be {arity} numbers")
@@ -130,7 +153,10 @@ def check_command(message: Any) -> dict[str, Any]:
                 raise ProtocolError(f"behaviour {name} takes no parameter {key!r}")
         for key, kind in params.items():
             if key in message:
-                clean[key] = _check_param(kind, message[key], f"{name}.{key}")
+                where = f"{name}.{key}"
+                clean[key] = _check_param(kind, message[key], where)
+                if where in RANGES:
+                    clean[key] = _in_range(clean[key], where, *RANGES[where])
             elif not kind.endswith("?"):
                 raise ProtocolError(f"behaviour {name} needs {key!r}")
     return clean
@@ -150,7 +176,14 @@ def decode_command(raw: bytes) -> dict[str, Any]:
         msgpack.StackError,
     ) as exc:
         raise ProtocolError(f"not a msgpack message: {exc}") from exc
-    return check_command(message)
+    try:
+        return check_command(message)
+    except ProtocolError as exc:
+        # The reply carries the id, so a client waiting for it gets the error, not a timeout.
+        ident = message.get("id") if isinstance(message, dict) else None
+        if isinstance(ident, int) and not isinstance(ident, bool):
+            exc.request_id = ident
+        raise
 
 
 def encode(message: dict[str, Any]) -> bytes:

@@ -5,6 +5,10 @@ has crossed the gate line between the posts in the gate's direction (stepping in
 past the line from the side does not count; crossing back undoes it), and `increase` measures
 a quantity's change since the previous checkpoint was awarded (turning the valve before the
 hose is connected earns nothing).
+
+A fallen robot earns nothing: no checkpoint is awarded while it is down or in its first
+STEADY_S seconds up again, a crossing made then is ignored, and a crossing counts only once
+the robot has stayed up for STEADY_S after it (a dive through a gate line is a fall).
 """
 
 from __future__ import annotations
@@ -18,6 +22,9 @@ from drcsim.errors import WorldError
 FALL_HEIGHT = 0.6  # pelvis above the ground, metres
 FALL_TILT = math.radians(45)
 MAX_FALLS = 3
+# Seconds the robot must be up before and after a crossing, and up before any award: longer
+# than a topple takes from upright to down (about 1 s) and than the walker's stop.
+STEADY_S = 3.0
 
 
 @dataclass(frozen=True)
@@ -45,6 +52,9 @@ class Memory:
 
     crossed: set[tuple[str, str]] = field(default_factory=set)
     baseline: dict[str, float] = field(default_factory=dict)
+    # crossings made while the robot was steady, by the time they were made: each becomes a
+    # crossing when the robot has stayed up STEADY_S after it; a fall forgets them
+    pending: dict[tuple[str, str], float] = field(default_factory=dict)
 
 
 def _gate_coordinates(position: tuple[float, ...], gate: GateFrame) -> tuple[float, float]:
@@ -114,22 +124,43 @@ class Scorer:
     events: list[dict[str, Any]] = field(default_factory=list)
     memory: Memory = field(default_factory=Memory)
     previous: Observation | None = None
+    up_since: float | None = 0.0  # the run starts with the robot standing
 
-    def _remember(self, obs: Observation) -> None:
-        before = self.previous
+    def steady(self, sim_time: float) -> bool:
+        """Return whether the robot has been up for STEADY_S (what earns anything)."""
+        return self.up_since is not None and sim_time - self.up_since >= STEADY_S - 1e-9
+
+    def _remember(self, obs: Observation, sim_time: float) -> None:
+        before, memory = self.previous, self.memory
         if before is None:
-            self.memory.baseline = dict(obs.quantities)
+            memory.baseline = dict(obs.quantities)
         else:
             for body, position in obs.positions.items():
                 if body not in before.positions:
                     continue
                 for name, gate in self.gates.items():
                     direction = crossing(before.positions[body], position, gate)
-                    if direction > 0:
-                        self.memory.crossed.add((body, name))
+                    if direction > 0 and self.steady(sim_time):
+                        memory.pending[(body, name)] = sim_time
                     elif direction < 0:
-                        self.memory.crossed.discard((body, name))
+                        memory.crossed.discard((body, name))
+                        memory.pending.pop((body, name), None)
+        for key, when in list(memory.pending.items()):
+            if sim_time - when >= STEADY_S - 1e-9:
+                memory.crossed.add(key)
+                del memory.pending[key]
         self.previous = obs
+
+    def _track_falls(self, sim_time: float, is_down: bool, new: list[dict[str, Any]]) -> None:
+        if is_down and not self.down:
+            self.falls += 1
+            new.append({"event": "fall", "falls": self.falls})
+            self.memory.pending.clear()  # what it crossed falling is not a crossing
+        if is_down:
+            self.up_since = None
+        elif self.up_since is None:
+            self.up_since = sim_time
+        self.down = is_down
 
     def update(
         self, sim_time: float, obs: Observation, pelvis_height: float, pelvis_tilt: float
@@ -138,13 +169,10 @@ class Scorer:
         if self.ended:
             return []
         new: list[dict[str, Any]] = []
-        is_down = pelvis_height < FALL_HEIGHT or pelvis_tilt > FALL_TILT
-        if is_down and not self.down:
-            self.falls += 1
-            new.append({"event": "fall", "falls": self.falls})
-        self.down = is_down
-        self._remember(obs)
-        while self.reached < len(self.checkpoints) and not self.falls >= MAX_FALLS:
+        self._track_falls(sim_time, pelvis_height < FALL_HEIGHT or pelvis_tilt > FALL_TILT, new)
+        self._remember(obs, sim_time)
+        steady = self.steady(sim_time)
+        while steady and self.reached < len(self.checkpoints) and not self.falls >= MAX_FALLS:
             checkpoint = self.checkpoints[self.reached]
             if not evaluate(checkpoint["when"], obs, self.gates, self.memory):
                 break

@@ -16,7 +16,8 @@ from drcsim.client import GROUND_TRUTH_TOPICS, LOCAL_PORT_OFFSET
 from drcsim.engine import Simulation
 from drcsim.errors import ProtocolError
 from drcsim.models.humanoid import ALL_JOINTS
-from drcsim.protocol import BEHAVIOURS, MAX_MESSAGE_BYTES, decode_command, encode
+from drcsim.protocol import BEHAVIOURS, MAX_MESSAGE_BYTES, RANGES, decode_command, encode
+from drcsim.ratelimit import RateLimiter
 from drcsim.rundir import LIVE_EVERY_S, write_live
 from drcsim.scene import TIMESTEP
 from drcsim.sensors import SENSOR_TOPICS
@@ -30,6 +31,9 @@ LOCAL_TOPICS = (*GROUND_TRUTH_TOPICS, *ALWAYS_TOPICS)  # what the loopback socke
 LOOPBACK = "127.0.0.1"
 MAX_LAG_STEPS = 200  # beyond this the wall clock is re-anchored: the run is slower than real time
 BATCH_STEPS = 5  # physics steps between looks at the sockets in real-time mode
+# Commands read per look: enough that a flood reaches the rate limiter (and is dropped there,
+# a few microseconds each) instead of queueing in front of everyone else's.
+READ_PER_LOOK = 200
 
 
 @dataclass
@@ -80,6 +84,7 @@ def describe_run(sim: Simulation, lockstep: bool) -> dict[str, Any]:
         "time_limit_s": spec.time_limit_s,
         "joints": joints,
         "behaviours": sorted(BEHAVIOURS),
+        "ranges": {key: [low, high] for key, (low, high, _) in RANGES.items()},
         "topics": [*ALWAYS_TOPICS, *LAN_ON_DEMAND_TOPICS],
         "local_topics": list(LOCAL_TOPICS),
         "checkpoints": [c["name"] for c in spec.checkpoints],
@@ -94,6 +99,7 @@ class ServerStats:
     requests: int = 0
     rejected: int = 0
     refused: int = 0
+    dropped: int = 0  # over a peer's budget (real-time mode), neither answered nor logged
 
 
 class SimServer:
@@ -104,6 +110,8 @@ class SimServer:
         self.settings = settings
         self.networks = parse_networks(settings.allow)
         self.stats = ServerStats()
+        self.limiter = RateLimiter()
+        self._rejections: dict[str, tuple[float, int]] = {}  # peer: last logged, not logged
         self.running = True
         self.subscriptions: set[bytes] = set()  # on the LAN-facing socket
         self.local_subscriptions: set[bytes] = set()
@@ -152,6 +160,7 @@ class SimServer:
         if wall >= 1.0:
             self.rtf = (step - self._rtf_mark[1]) * TIMESTEP / wall
             self._rtf_mark = (now, step)
+            self.limiter.settle(now)
         if now - self._live_at >= LIVE_EVERY_S:
             self.write_live()
 
@@ -212,17 +221,29 @@ class SimServer:
             self.local_subscriptions, GROUND_TRUTH_TOPICS
         )
 
-    def _handle_command(self) -> None:
-        frames = self.router.recv_multipart(copy=False)
+    def _handle_commands(self) -> None:
+        for _ in range(READ_PER_LOOK):
+            try:
+                frames = self.router.recv_multipart(zmq.NOBLOCK, copy=False)
+            except zmq.Again:
+                return
+            self._handle_command(frames)
+
+    def _handle_command(self, frames: list[zmq.Frame]) -> None:
         identity = frames[0].bytes
         peer = str(frames[-1].get("Peer-Address")) if len(frames) > 1 else "?"
+        # Real time is the run's: a flooding peer's excess is dropped before any work on it
+        # (lock-step time waits for the client, so its pace is its own business).
+        if not self.settings.lockstep and not self.limiter.admit(peer, time.monotonic()):
+            self.stats.dropped += 1
+            return
         if len(frames) != 2:
             self._reject(identity, peer, f"expected one frame, got {len(frames) - 1}")
             return
         try:
             message = decode_command(frames[1].bytes)
         except ProtocolError as exc:
-            self._reject(identity, peer, str(exc))
+            self._reject(identity, peer, str(exc), exc.request_id)
             return
         self.stats.requests += 1
         reply = self._serve(message, peer)
@@ -230,10 +251,24 @@ class SimServer:
             reply["id"] = message["id"]
         self.router.send_multipart([identity, encode(reply)])
 
-    def _reject(self, identity: bytes, peer: str, reason: str) -> None:
+    def _reject(
+        self, identity: bytes, peer: str, reason: str, request_id: int | None = None
+    ) -> None:
         self.stats.rejected += 1
-        log.warning("rejected message from %s: %s", peer, reason)
-        self.router.send_multipart([identity, encode({"ok": False, "error": reason})])
+        # One line a second per peer at most: a stream of bad frames must not become a
+        # stream of log lines (the count of those not logged goes in the next line).
+        now = time.monotonic()
+        logged_at, unlogged = self._rejections.get(peer, (-1.0, 0))
+        if self.limiter.flooding(peer) or now - logged_at < 1.0:
+            self._rejections[peer] = (logged_at, unlogged + 1)
+        else:
+            more = f" ({unlogged} more rejected since, not logged)" if unlogged else ""
+            log.warning("rejected message from %s: %s%s", peer, reason, more)
+            self._rejections[peer] = (now, 0)
+        reply: dict[str, Any] = {"ok": False, "error": reason}
+        if request_id is not None:
+            reply["id"] = request_id
+        self.router.send_multipart([identity, encode(reply)])
 
     def _serve(self, message: dict[str, Any], peer: str) -> dict[str, Any]:
         op = message["op"]
@@ -263,7 +298,7 @@ class SimServer:
             if sock is self.zap:
                 self._handle_zap()
             elif sock is self.router:
-                self._handle_command()
+                self._handle_commands()
             else:
                 self._handle_subscription(sock)
 
@@ -302,6 +337,7 @@ class SimServer:
 
     def close(self) -> None:
         """Close the sockets and the simulation (which finalises its logs)."""
+        self.limiter.settle(time.monotonic(), final=True)
         self.sim.close()
         for sock in (self.router, self.publisher, self.local, self.zap):
             sock.close(linger=0)

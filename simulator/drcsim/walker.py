@@ -169,6 +169,8 @@ class Walker:
         self.tick = 0
         self.steps = 0
         self.goal: tuple[float, float, float] | None = None
+        # a goal sent mid-walk, taken at the end of the current plan (both feet down, at rest)
+        self.next_goal: tuple[tuple[float, float, float], GaitParameters] | None = None
         self.status = "standing"
         self.replans = 0
         self.pelvis_z = float(pos[2])
@@ -213,6 +215,19 @@ class Walker:
             swing.floor = self.footholds.floor(swing)
         self.tick = 0
         self.status = "walking"
+
+    def redirect(self, goal: tuple[float, float, float], params: GaitParameters) -> None:
+        """Walk to `goal` instead: now if standing, else when the current plan's steps are done.
+
+        Replanning mid-swing planned from a foot still in the air as if it stood and felled
+        the robot; so did replanning just after a landing with the body still moving (tried).
+        A plan's end has both feet down and the COM at rest between them.
+        """
+        if self.status != "walking":
+            self.replans = 0
+            self.walk_to(goal, params)
+        else:
+            self.next_goal = (goal, params.checked())
 
     def _mid_yaw(self) -> float:
         a, b = self.feet["left"].yaw, self.feet["right"].yaw
@@ -298,6 +313,9 @@ class Walker:
 
     def _finish(self) -> None:
         self.zmp, self.swings, self.tick = [], [], 0
+        if self.next_goal is not None:  # the plan's steps have landed, the COM is at rest
+            (self.goal, self.params), self.next_goal = self.next_goal, None
+            self.replans = 0
         if self.goal is None:
             return
         pos, _ = self.client.getBasePositionAndOrientation(self.scene.robot)

@@ -5,20 +5,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from drcsim._bullet import new_client, pybullet
+from drcsim.errors import ProtocolError
 from drcsim.protocol import check_command
 
 
-def test_position_targets_beyond_limits_are_clamped(make_sim) -> None:
+def test_position_targets_beyond_limits_are_refused_with_the_range(make_sim) -> None:
     sim = make_sim("vrc_task_2")
     c = sim.controller
-    # Arm joints: the stand behaviour owns the legs and trunk.
-    wanted = {"l_arm_elx": 5.0, "r_arm_wrx": -3.0, "r_arm_elx": 2.0, "l_arm_shx": -9.0}
-    assert sim.apply_command(check_command({"op": "joints", "position": wanted}))["ok"]
-    sim.step(1500)
-    for name in wanted:
-        slot = c.slot[name]
-        assert c.lower[slot] - 0.02 <= c.position[slot] <= c.upper[slot] + 0.02
+    # Arm joints: the stand behaviour owns the legs and back.
+    wanted = {"l_arm_elx": 5.0, "r_arm_wrx": -3.0}
+    with pytest.raises(ProtocolError, match=r"position.l_arm_elx must be in 0..2.35, not 5"):
+        check_command({"op": "joints", "position": wanted})
     elbow = c.slot["l_arm_elx"]
+    at_limit = {"l_arm_elx": float(c.upper[elbow])}
+    assert sim.apply_command(check_command({"op": "joints", "position": at_limit}))["ok"]
+    sim.step(1500)
     assert c.position[elbow] > c.upper[elbow] - 0.1  # it went as far as allowed
 
 
@@ -54,3 +55,12 @@ def test_a_closed_physics_client_cannot_reach_the_next_ones_world() -> None:
             closed.getNumBodies()
     finally:
         other.disconnect()
+
+
+def test_the_gait_ranges_are_the_same_on_the_wire_and_in_the_walker() -> None:
+    from drcsim.gait import _GAIT_RANGES
+    from drcsim.protocol import RANGES
+
+    for name, low, high in _GAIT_RANGES:
+        if name != "pelvis_height":  # the walker's own, not a team's parameter
+            assert RANGES[f"walk.{name}"][:2] == (low, high)

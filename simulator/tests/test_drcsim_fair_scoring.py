@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from drcsim.protocol import check_command
-from drcsim.scoring import GateFrame, Observation, Scorer
+from drcsim.scoring import STEADY_S, GateFrame, Observation, Scorer
 from drcsim.worlds import load_world
 
 GATE = {"g": GateFrame(5.0, 0.0, 0.0, 2.0)}
@@ -17,8 +17,10 @@ def _at(x: float, y: float, **quantities: float) -> Observation:
 
 
 def _path(scorer: Scorer, points: list[tuple[float, float]]) -> int:
+    """Walk `points` 10 ms apart (the robot long up), then stand at the last one."""
     for tick, (x, y) in enumerate(points):
-        scorer.update(tick * 0.01, _at(x, y), 0.9, 0.0)
+        scorer.update(STEADY_S + tick * 0.01, _at(x, y), 0.9, 0.0)
+    scorer.update(2 * STEADY_S + len(points) * 0.01, _at(*points[-1]), 0.9, 0.0)
     return scorer.reached
 
 
@@ -38,8 +40,9 @@ def test_crossing_back_undoes_a_gate_not_yet_awarded() -> None:
     rules = [{"name": "ready", "when": {"flag": "ready"}}, *THROUGH]
     scorer = Scorer(rules, GATE, 100.0)
     for tick, x in enumerate((4.9, 5.1, 4.9)):
-        scorer.update(tick * 0.01, _at(x, 0.0), 0.9, 0.0)
-    scorer.update(0.05, Observation({"robot": (4.9, 0.0, 0.9)}, {"ready": True}, {}), 0.9, 0.0)
+        scorer.update(STEADY_S + tick * 0.01, _at(x, 0.0), 0.9, 0.0)
+    ready = Observation({"robot": (4.9, 0.0, 0.9)}, {"ready": True}, {})
+    scorer.update(2 * STEADY_S, ready, 0.9, 0.0)
     assert scorer.reached == 1  # the gate was crossed back before its turn came
 
 
@@ -50,7 +53,7 @@ def test_the_valve_counts_only_once_the_hose_is_connected() -> None:
     def observe(tick: int, connected: bool, valve: float) -> int:
         flags = {"hose_grasped": not connected, "hose_connected": connected}
         quantities = {"hose_lift": 0.2, "hose_inlet_distance": 0.0, "valve_angle": valve}
-        scorer.update(tick * 0.01, Observation({}, flags, quantities), 0.9, 0.0)
+        scorer.update(STEADY_S + tick * 0.01, Observation({}, flags, quantities), 0.9, 0.0)
         return scorer.reached
 
     assert observe(0, False, 0.0) == 2  # picked up and aligned

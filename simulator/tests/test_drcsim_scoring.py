@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from drcsim.models import humanoid
 from drcsim.protocol import check_command
-from drcsim.scoring import GateFrame, Memory, Observation, Scorer, evaluate
+from drcsim.scene import yaw_quaternion
+from drcsim.scoring import STEADY_S, GateFrame, Memory, Observation, Scorer, evaluate
 
 GATES = {"g1": GateFrame(5.0, 0.0, 0.0, 2.0), "g2": GateFrame(10.0, 0.0, 0.0, 2.0)}
 RULES = [
@@ -29,8 +31,9 @@ def test_conditions_evaluate_from_data() -> None:
 
 def test_checkpoints_are_awarded_only_in_order() -> None:
     scorer = Scorer(RULES, GATES, time_limit_s=100.0)
-    assert scorer.update(1.0, _obs(0.0, ready=True, q=3.0), 0.9, 0.0) == []
-    events = scorer.update(2.0, _obs(5.5, ready=True, q=3.0), 0.9, 0.0)
+    assert scorer.update(4.0, _obs(0.0, ready=True, q=3.0), 0.9, 0.0) == []
+    assert scorer.update(5.0, _obs(5.5, ready=True, q=3.0), 0.9, 0.0) == []
+    events = scorer.update(5.0 + STEADY_S, _obs(5.6, ready=True, q=3.0), 0.9, 0.0)
     assert [e["checkpoint"] for e in events if e["event"] == "checkpoint"] == [1, 2]
     assert scorer.ended and scorer.end_reason == "complete"
 
@@ -55,14 +58,29 @@ def _collapse(sim) -> dict:
     return sim.snapshot()["score"]
 
 
+def _stood_up(sim) -> None:
+    """Put the fallen robot upright where it lies (as a team's own get-up would end)."""
+    client, robot = sim.client, sim.scene.robot
+    (x, y, _), orn = client.getBasePositionAndOrientation(robot)
+    z = humanoid.STAND_PELVIS_HEIGHT + sim.scene.ground_height(x, y)
+    yaw = client.getEulerFromQuaternion(orn)[2]
+    client.resetBasePositionAndOrientation(robot, [x, y, z], yaw_quaternion(yaw))
+    client.resetBaseVelocity(robot, [0, 0, 0], [0, 0, 0])
+    sim.controller.reset_to(humanoid.STAND_POSTURE)
+    sim.step(10)
+
+
 def test_falls_are_counted_and_the_third_ends_the_run(make_sim, tmp_path) -> None:
     sim = make_sim("vrc_task_2", "1", log_dir=tmp_path / "run")
     for expected in (1, 2):
         score = _collapse(sim)
         assert score["falls"] == expected and not score["ended"]
-        assert sim.apply_command(check_command({"op": "behaviour", "name": "stand"}))["ok"]
+        stand = check_command({"op": "behaviour", "name": "stand"})
+        assert "the robot is down" in sim.apply_command(stand)["error"]  # no get-up assist
+        _stood_up(sim)
+        assert sim.apply_command(stand)["ok"]
         sim.step(200)
-        assert not sim.scorer.down  # the recovery assist stood it up
+        assert not sim.scorer.down
     score = _collapse(sim)
     assert score == {"checkpoints": 0, "falls": 3, "ended": True, "reason": "falls"}
     assert sim.step(100) == 0  # nothing runs after the end

@@ -16,9 +16,10 @@ def _pelvis(sim) -> tuple[float, ...]:
     return tuple(sim.client.getBasePositionAndOrientation(sim.scene.robot)[0])
 
 
-def _walk(client: LocalClient, pose: list[float], seconds: float) -> dict:
+def _walk(client: LocalClient, pose: list[float], seconds: float, send: bool = True) -> dict:
     """Walk to `pose` through the joints; return the state once the walk is no longer on."""
-    client.behaviour("walk", pose=pose)
+    if send:
+        client.behaviour("walk", pose=pose)
     for _ in range(round(seconds * 2)):
         state = client.step(500)
         if not state["behaviour"]["walk"].startswith("walking"):
@@ -161,3 +162,26 @@ def test_the_walker_steps_up_onto_a_box_and_down_off_it(make_sim) -> None:
             break
     assert state["behaviour"]["walk"] == "done" and state["score"]["falls"] == 0
     assert highest == pytest.approx(0.05, abs=0.01)  # it stood on the box on the way
+
+
+def test_a_new_goal_mid_walk_is_taken_with_both_feet_down_and_does_not_fell_it(make_sim) -> None:
+    sim = make_sim("vrc_task_2", "1")
+    client = LocalClient(sim)
+    client.behaviour("walk", pose=[3.0, 0.0, 0.0])
+    taken: list[bool] = []
+    original = sim.behaviours.walker.walk_to
+
+    def watched(goal, params) -> None:  # records whether a foot was in the air at each plan
+        taken.append(sim.behaviours.walker.active is not None)
+        original(goal, params)
+
+    sim.behaviours.walker.walk_to = watched  # type: ignore[method-assign]
+    for tick in range(9):
+        client.step(250)
+        while tick == 8 and sim.behaviours.walker.active is None:
+            client.step(10)  # until a foot is in the air
+    assert client.behaviour("walk", pose=[1.6, 0.6, 0.8])["ok"]  # mid-swing
+    assert sim.behaviours.walker.goal == (3.0, 0.0, 0.0)  # not yet: that foot is in the air
+    state = _walk(client, [1.6, 0.6, 0.8], 60, send=False)
+    assert taken and not any(taken)  # every plan made with both feet down
+    assert state["behaviour"]["walk"] == "done" and state["score"]["falls"] == 0
