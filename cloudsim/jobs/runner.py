@@ -41,6 +41,9 @@ MASK = "***"
 WROTE = "cloudsim.wrote"  # session.info: the session's transaction has written
 CANCEL_POLL_SECONDS = 1.0  # how often a running job reads its cancel flag, at most
 HELD = "remote step while the job's transaction holds uncommitted writes"
+# Called with (job kind, stage) once a job has entered a stage. Production adds none; the
+# crash tests add one that kills the worker there, to resume every kind from every stage.
+STAGE_HOOKS: list[Callable[[str, str], None]] = []
 
 
 class JobGone(Exception):
@@ -228,6 +231,8 @@ class JobContext:
             values["progress"] = max(0, min(100, progress))
         self._report(values, "")
         self.log(f"== {name}")
+        for hook in STAGE_HOOKS:
+            hook(self.job.kind, name)
 
     def progress(self, percent: int) -> None:
         """Set overall progress (0-100)."""
