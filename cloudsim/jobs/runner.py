@@ -138,6 +138,9 @@ class JobContext:
         self._pending: list[tuple[dict[str, object], str]] = []
         self._lock = threading.Lock()
         self.last_progress = time.monotonic()  # what the watchdog looks at
+        # the stage as the body last entered it, readable from the watchdog's thread (the
+        # row's attribute may be expired there, and loading it needs the body's app context)
+        self.current_stage: str = job.stage or ""
         self.stalled: str | None = None  # the watchdog's reason to stop
         self._cancelled: str | None = job.cancel_reason
         self._cancel_read = 0.0
@@ -226,6 +229,7 @@ class JobContext:
         """Enter a named stage, optionally setting progress (0-100); a cancelled or stalled
         job stops here instead."""
         self.check()
+        self.current_stage = name
         values: dict[str, object] = {"stage": name}
         if progress is not None:
             values["progress"] = max(0, min(100, progress))
