@@ -40,8 +40,10 @@ def _settings() -> dict[str, str]:
         "CLOUDSIM_LOCAL_SUBNET_POOL": f"10.{NETWORKS}.0.0/16",
         "CLOUDSIM_LOCAL_PUBLIC_CIDR": f"198.18.{NETWORKS - 200}.0/24",
         "CLOUDSIM_JOB_LEASE_SECONDS": "10",
-        # two shared cores: a launch must not fail for the load alone
+        # two shared cores: a launch must not fail for the load alone (a slow self-test, the
+        # machines' image built once, quiet for minutes)
         "CLOUDSIM_SIM_MIN_RTF": "0.05",
+        "CLOUDSIM_JOB_STALL_SECONDS": "1800",
     }
 
 

@@ -39,6 +39,8 @@ def worker_process(
         CLOUDSIM_LOCAL_PREFIX=config.local_prefix,
         CLOUDSIM_LOCAL_SUBNET_POOL=config.local_subnet_pool,
         CLOUDSIM_LOCAL_PUBLIC_CIDR=config.local_public_cidr,
+        # the test's own floor (a loaded machine's simulator self-test), as in-process workers
+        CLOUDSIM_SIM_MIN_RTF=str(config.sim_min_rtf),
         PYTHONPATH=str(root),
         **(extra_env or {}),
     )
