@@ -65,7 +65,9 @@ TERMINATE = ["stopping its jobs", "machines", "network", "keys", "terminated"]
 
 @pytest.fixture
 def crash_config(make_config: Callable[..., Config]) -> Config:
-    return hosts_config(make_config, PREFIX, 236)
+    # the machines' image is built once per test folder, quiet for minutes on a loaded
+    # machine: the watchdog (tests/jobs/test_watchdog.py) must not stop that first build
+    return hosts_config(make_config, PREFIX, 236, job_stall_seconds=1800)
 
 
 @pytest.fixture
