@@ -6,10 +6,12 @@ and measures each host: the PSS of every process in it (its launcher included) p
 overlay's upper layer holds on the hosts' tmpfs (files a host writes are memory here). Prints
 each role's figure and its ratio to the figure the provider counts now; with --write, stores
 the largest figure seen per role in provisioners/providers/local/host_memory.json, which the
-local provider's capacity reads (times its margin).
+local provider's capacity reads (times its margin). A `sim` host counts its idle figure plus
+the peak of a run's simulator (`drcsim serve` on a VRC world, measured here too): capacity
+must hold the runs, not only the idle machines.
 
 Needs root. Usage: python -m bench.host_memory [--kinds cloudsim,vrc,simple] [--settle 20]
-[--write]
+[--write] [--simulator-only --kinds ""]
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import json
 import os
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 from collections import defaultdict
@@ -27,6 +30,7 @@ from importlib import resources
 from pathlib import Path
 
 from celery.contrib.testing.worker import start_worker
+from drcsim.rundir import serve_argv
 from libcloud.compute.base import Node
 
 from bench.local_hosts import host_pss_kib
@@ -37,7 +41,7 @@ from cloudsim.config import Config
 from cloudsim.extensions import db
 from cloudsim.launched_constellations import service
 from cloudsim.providers.service import open_provider
-from provisioners.providers.local import host_memory
+from provisioners.providers.local import host_memory, processes
 from tests.support.servers import bench_redis
 
 
@@ -96,6 +100,28 @@ def measure(kinds: list[str], settle: float) -> dict[str, list[float]]:
     return figures
 
 
+def simulator_run_mib(seconds: float = 20.0) -> float:
+    """Return the peak PSS (MiB) of a run's simulator (what `sim` takes on top while a run
+    goes): `drcsim serve` on a VRC world, sampled twice a second for `seconds`."""
+    drcsim = Path(sys.executable).with_name("drcsim")
+    with tempfile.TemporaryDirectory(prefix="cloudsim-bench-sim-") as logs:
+        argv = serve_argv(
+            str(drcsim), "vrc_task_2", 1, bind="127.0.0.1", allow=["127.0.0.0/8"],
+            log_dir=logs, time_limit_s=seconds + 30,
+        )  # fmt: skip
+        process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        peak = 0
+        try:
+            deadline = time.monotonic() + seconds
+            while time.monotonic() < deadline and process.poll() is None:
+                peak = max(peak, processes.proportional_memory_kib(process.pid))
+                time.sleep(0.5)
+        finally:
+            process.terminate()
+            process.wait(30)
+    return peak / 1024
+
+
 def write(figures: dict[str, list[float]]) -> Path:
     """Store the largest figure per role (rounded up to MiB) as the provider's package data."""
     path = Path(str(resources.files(host_memory.__package__).joinpath(host_memory.FIGURES)))
@@ -117,12 +143,21 @@ def main() -> None:
     parser.add_argument("--kinds", default="cloudsim,vrc,simple")
     parser.add_argument("--settle", type=float, default=20.0)
     parser.add_argument("--write", action="store_true")
+    parser.add_argument(
+        "--simulator-only", action="store_true", help="measure only a run's simulator (sim)"
+    )
     args = parser.parse_args()
     if os.geteuid() != 0:
         raise SystemExit("bench/host_memory.py needs root (the local provider makes namespaces)")
     counted = host_memory.measured()
     print("memory per local host, idle once ready (PSS of its processes + its tmpfs layer)")
-    figures = measure(args.kinds.split(","), args.settle)
+    figures = measure(args.kinds.split(","), args.settle) if args.kinds else defaultdict(list)
+    if "sim" in figures or args.simulator_only:
+        # a sim host idle takes little; while a run goes its simulator takes the most
+        running = simulator_run_mib()
+        print(f"  a run's simulator (drcsim serve, vrc_task_2) peak {running:7.1f} MiB")
+        idle = max(figures["sim"], default=float(counted.roles_mib.get("sim", 0)) / 1.25)
+        figures["sim"] = [idle + running]
     print(f"  {'role':9s} {'measured':>9s} {'counted':>9s}  ratio counted/measured")
     for role, values in sorted(figures.items()):
         peak = max(values)

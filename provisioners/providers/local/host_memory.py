@@ -1,7 +1,8 @@
 """Memory each role's host takes on this provider, as bench/host_memory.py measured it.
 
-A `cloudsim` host (a team's CloudSim, with its workers and database) takes four times a vrc
-host: counting every host alike admitted launches that then ran out of memory. The figures
+A `cloudsim` host (a team's CloudSim, with its workers, database and software on its own
+tmpfs layer) takes some forty times a vrc field computer: counting every host alike (160 MiB)
+admitted ten times too many team CloudSims. The figures
 are package data the bench rewrites (`--write`), so admission follows measurement.
 """
 
