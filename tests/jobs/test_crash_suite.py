@@ -1,5 +1,5 @@
 """The crash suite: workers killed at every stage of a launch, a run's start and stop and a
-terminate, and the run stopped while it starts; the invariants checked after each.
+terminate, and a run stopped while it starts; the invariants checked after each.
 
 One vrc constellation on local hosts carries the whole life. Each job is killed once at each of
 its stages in turn: a worker that SIGKILLs itself (worker and pool) as the job enters stage S
@@ -9,6 +9,7 @@ launch, one run start at every stage of a start, and so on. After each job: it e
 (succeeded, one attempt per kill and one more), the API answered no 5xx while it recovered;
 after the run, its metering is complete (tests/competition/test_crash_metering.py's check);
 after the terminate, no host, mount, host process or key of the constellation is left.
+A second test stops a run through the API while its start is at the router step.
 
 The whole `cloudsim up` tree killed at each stage is tests/jobs/test_crash_up.py.
 """
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import os
 import subprocess
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -50,7 +52,12 @@ from provisioners.providers.local import processes
 from tests.competition.support import open_task
 from tests.competition.test_crash_metering import DOWNLINK_BITS, UPLINK_BITS, _check_metering
 from tests.conftest import make_user, running_app, token_for
-from tests.launched_constellations.conftest import destroy_everything, hosts_config, leftovers
+from tests.launched_constellations.conftest import (
+    destroy_everything,
+    finished,
+    hosts_config,
+    leftovers,
+)
 from tests.support.servers import wait_for
 from tests.support.workers import crash_worker, kill_worker
 
@@ -219,9 +226,6 @@ def test_workers_killed_at_every_stage_lose_nothing(
     assert run is not None and run.state == RunState.FINISHED, run and run.error
     _check_metering(crash_config, run, "killed at every stage")
 
-    # a run stopped while it starts: the start hands over at its next step, nothing runs on
-    _stopped_while_starting(crash_app, client, team, member_headers, crash_config)
-
     # terminated, the terminate killed at every stage: nothing of the constellation is left
     provider = open_provider("local", crash_config)
     launchers = [
@@ -253,21 +257,43 @@ def test_workers_killed_at_every_stage_lose_nothing(
 FINAL = [JobState.SUCCEEDED, JobState.FAILED]
 
 
+@pytest.mark.timeout(1800)
+def test_a_run_stopped_while_it_starts_stops_at_the_next_step(
+    crash_app: Flask, crash_config: Config
+) -> None:
+    """Stop a run (through the API) once its start armed the router: the simulator never
+    starts, the stop job disarms the router, the run ends `finished`, ended by `stopped`."""
+    team = people_service.create_team(SYSTEM, "Team Stop")
+    db.session.commit()
+    member, admin = make_user(Role.USER, team), make_user(Role.ADMIN)
+    headers = token_for(member)
+    app, client, config = crash_app, crash_app.test_client(), crash_config
+    with start_worker(
+        app.extensions["celery"], pool="threads", concurrency=2,
+        perform_ping_check=False, loglevel="WARNING", shutdown_timeout=30,
+    ):  # fmt: skip
+        body = {"name": "stopping", "kind": "vrc", "provider": "local", "team_id": team.id}
+        launched = client.post("/api/v1/constellations", json=body, headers=token_for(admin))
+        assert launched.status_code == 202, launched.get_data(as_text=True)
+        done = finished(launched.get_json()["job"]["id"])
+        assert done.state == JobState.SUCCEEDED, f"{done.error}\n{done.log[-3000:]}"
+    _stopped_while_starting(app, client, team, headers, config)
+
+
 def _stopped_while_starting(
     app: Flask, client: FlaskClient, team: Team, headers: dict[str, str], config: Config
 ) -> None:
     """Start a run and stop it (through the API) once its start armed the router."""
     task = open_task(team.id, timeout_s=600)
-    asked: list[int] = []
+    reached, proceed = threading.Event(), threading.Event()
 
-    def stop_there(kind: str, stage: str) -> None:
-        if (kind, stage) == ("run.start", "router") and not asked:
-            run_id = int(db.session.scalars(select(Run.id).order_by(Run.id.desc())).first() or 0)
-            with app.test_client() as stopper:
-                answer = stopper.post(f"/api/v1/runs/{run_id}/stop", headers=headers)
-                asked.append(answer.status_code)
+    def hold_there(kind: str, stage: str) -> None:
+        # the start waits at its router step until the test has asked for the stop
+        if (kind, stage) == ("run.start", "router") and not reached.is_set():
+            reached.set()
+            proceed.wait(120)
 
-    STAGE_HOOKS.append(stop_there)
+    STAGE_HOOKS.append(hold_there)
     try:
         with start_worker(
             app.extensions["celery"], pool="threads", concurrency=2,
@@ -277,6 +303,11 @@ def _stopped_while_starting(
             assert answer.status_code == 202, answer.get_data(as_text=True)
             db.session.commit()
             run_id = answer.get_json()["id"]
+            wait_for(reached.is_set, 300, "the start's router step")
+            stopped = client.post(f"/api/v1/runs/{run_id}/stop", headers=headers)
+            assert stopped.status_code == 202, stopped.get_data(as_text=True)
+            assert stopped.get_json()["state"] == "starting"  # asked while it starts
+            proceed.set()
 
             def ended() -> bool:
                 db.session.expire_all()
@@ -287,8 +318,8 @@ def _stopped_while_starting(
 
             wait_for(ended, 600, f"run {run_id} to end")
     finally:
-        STAGE_HOOKS.remove(stop_there)
-    assert asked == [202], asked  # the stop was taken while the run was starting
+        proceed.set()
+        STAGE_HOOKS.remove(hold_there)
     start_job = db.session.get(Job, _run_job(run_id, "run.start"))
     stop_job = db.session.get(Job, _run_job(run_id, "run.stop"))
     assert start_job is not None and stop_job is not None
