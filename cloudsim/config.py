@@ -113,7 +113,9 @@ SETTINGS: dict[str, Setting] = {
         "0", "Most hosts the local provider runs at once; 0 = as many as the machine allows"
     ),
     "CLOUDSIM_LOCAL_HOST_MEMORY_MB": Setting(
-        "160", "Memory the local provider counts per host (an average vrc host) in its capacity"
+        "0",
+        "Memory the local provider counts per host in its capacity; 0 = each role's figure "
+        "measured by bench/host_memory.py",
     ),
     "CLOUDSIM_LOCAL_MEMORY_RESERVE_MB": Setting(
         "2048", "Memory the local provider leaves to the controller when counting its capacity"

@@ -242,10 +242,11 @@ def collect_logs(
     store: LogStore,
     staging: Path,
     log: Callable[[str], None],
+    ran: bool = True,
 ) -> list[str]:
     """Copy each of the run's logs into the store unless it is there already with the same
     checksum; return the problems with logs that could not be copied (missing optional logs
-    are no problem)."""
+    are no problem, nor any missing log of a run whose simulator never started)."""
     staging.mkdir(parents=True, exist_ok=True)
     problems: list[str] = []
     stored = {a.filename: a for a in run.artifacts}
@@ -262,7 +263,7 @@ def collect_logs(
                 continue
             for remote in logs:
                 if remote.filename not in sources:
-                    if remote.required:
+                    if remote.required and ran:
                         problems.append(f"{remote.filename}: not found on {remote.machine}")
                     log(f"{remote.filename}: not on {remote.machine}")
             # a big log starts copying at once; the small ones' round trips go meanwhile

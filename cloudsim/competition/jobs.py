@@ -22,6 +22,7 @@ from csrouter.bandwidth_log import read_bandwidth_log
 from drcsim.rundir import BANDWIDTH_MCAP, FINAL, SCORE, WORLD, read_score_log, serve_argv
 from flask import current_app
 from mcap.exceptions import McapError
+from sqlalchemy import select
 
 from cloudsim.competition import current_run, lifecycle
 from cloudsim.competition.artifacts import LogStore, artifact_for, collect_logs, run_dir
@@ -204,7 +205,7 @@ def start_run_job(ctx: JobContext, job: RunJob) -> None:
         with machines(run, config, ctx) as reach:
             if reach.router is not None:
                 # counting and capped before the simulator exists: no second of it unmetered
-                ctx.stage("router", 20)
+                _next_step(ctx, run, "router", 20)
                 limits = router_control.Limits(
                     task.latency_ms, task.uplink_bits, task.downlink_bits
                 )
@@ -212,12 +213,17 @@ def start_run_job(ctx: JobContext, job: RunJob) -> None:
                     reach.executor, reach.router, limits, router_run_id(run)
                 )
                 step_done("run.start", "router")
-            ctx.stage("simulator", 60)
+            _next_step(ctx, run, "simulator", 60)
             run.running_at = _start_simulator(reach, run)
             step_done("run.start", "simulator")
-            ctx.stage("announce", 80)
+            _next_step(ctx, run, "announce", 80)
             current_run.announce(reach.executor, reach.field_computers, run, reach.sim_ip)
             step_done("run.start", "announce")
+    except StopAsked as asked:
+        # what was started (an armed router, a simulator) is the stop job's to undo
+        ctx.log(f"stop asked while starting ({asked}): the stop job takes over")
+        lifecycle.stopped_while_starting(run)
+        return
     except (CloudSimError, SSHError, ValueError) as exc:
         db.session.rollback()
         run = ctx.load(Run, job.run_id)
@@ -229,6 +235,20 @@ def start_run_job(ctx: JobContext, job: RunJob) -> None:
     notify_run_event(run, "started")  # sent by its own tasks once this job commits
     ctx.stage("running", 100)
     lifecycle.stop_requested_while_starting(run)
+
+
+class StopAsked(Exception):
+    """The run was asked to stop while its start job was on its way; the reason is the arg."""
+
+
+def _next_step(ctx: JobContext, run: Run, stage: str, progress: int) -> None:
+    """Enter a step of the start, unless the run was asked to stop meanwhile (read now, on a
+    connection of its own: the start job's transaction would not see the request)."""
+    with db.engine.connect() as conn:
+        reason = conn.scalar(select(Run.stop_reason).where(Run.id == run.id))
+    if reason is not None:
+        raise StopAsked(reason)
+    ctx.stage(stage, progress)
 
 
 def _start_simulator(reach: Machines, run: Run) -> datetime:
@@ -337,7 +357,13 @@ def _stop_on_machines(
     ctx.stage("logs", 50)
     staging = config.instance_dir / "staging" / "runs" / str(run.id)
     problems += collect_logs(
-        run, reach.executor, reach.by_role(), store, staging, lambda line: ctx.log(line)
+        run,
+        reach.executor,
+        reach.by_role(),
+        store,
+        staging,
+        lambda line: ctx.log(line),
+        ran=run.running_at is not None,
     )
     try:  # the router's bandwidth as MCAP, beside the simulator's run.mcap
         made = store_bandwidth_mcap(run, store, staging)

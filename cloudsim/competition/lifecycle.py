@@ -97,6 +97,14 @@ def stop_requested_while_starting(run: Run) -> None:
         request_stop(run, run.stop_reason)
 
 
+def stopped_while_starting(run: Run) -> None:
+    """Hand a run asked to stop before its start finished to its stop job, which undoes what
+    the start did (an armed router, a started simulator)."""
+    db.session.refresh(run, ["stop_reason"])
+    run.state = RunState.STOPPING
+    enqueue_stop(run)
+
+
 def stopping(run: Run) -> None:
     """Mark a run as being stopped by its stop job."""
     run.state = RunState.STOPPING

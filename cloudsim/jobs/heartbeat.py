@@ -55,7 +55,7 @@ class Heartbeat(threading.Thread):
             reason = (
                 f"stopped by the watchdog: no progress for {idle:.0f} s "
                 f"(CLOUDSIM_JOB_STALL_SECONDS={self.stall:g}) in stage "
-                f"{self.ctx.job.stage or 'start'!r}"
+                f"{self.ctx.current_stage or 'start'!r}"
             )
             log.warning("job %s: %s", self.job_id, reason)
             self.ctx.stall(reason)

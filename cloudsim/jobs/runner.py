@@ -42,6 +42,9 @@ MASK = "***"
 WROTE = "cloudsim.wrote"  # session.info: the session's transaction has written
 CANCEL_POLL_SECONDS = 1.0  # how often a running job reads its cancel flag, at most
 HELD = "remote step while the job's transaction holds uncommitted writes"
+# Called with (job kind, stage) once a job has entered a stage. Production adds none; the
+# crash tests add one that kills the worker there, to resume every kind from every stage.
+STAGE_HOOKS: list[Callable[[str, str], None]] = []
 
 
 class JobGone(Exception):
@@ -136,6 +139,9 @@ class JobContext:
         self._pending: list[tuple[dict[str, object], str]] = []
         self._lock = threading.Lock()
         self.last_progress = time.monotonic()  # what the watchdog looks at
+        # the stage as the body last entered it, readable from the watchdog's thread (the
+        # row's attribute may be expired there, and loading it needs the body's app context)
+        self.current_stage: str = job.stage or ""
         self.stalled: str | None = None  # the watchdog's reason to stop
         self._cancelled: str | None = job.cancel_reason
         self._cancel_read = 0.0
@@ -224,11 +230,14 @@ class JobContext:
         """Enter a named stage, optionally setting progress (0-100); a cancelled or stalled
         job stops here instead."""
         self.check()
+        self.current_stage = name
         values: dict[str, object] = {"stage": name}
         if progress is not None:
             values["progress"] = max(0, min(100, progress))
         self._report(values, "")
         self.log(f"== {name}")
+        for hook in STAGE_HOOKS:
+            hook(self.job.kind, name)
 
     def progress(self, percent: int) -> None:
         """Set overall progress (0-100)."""

@@ -60,6 +60,8 @@ class Capacity(MethodView):
             "networks": capacity.networks,
             "public_addresses": capacity.public,
             "limited_by": capacity.limited_by,
+            "memory_mib": capacity.memory_mib,
+            "host_memory_mib": capacity.host_memory_mib,
             "kinds": found.kinds,
         }
 

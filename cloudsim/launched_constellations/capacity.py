@@ -43,7 +43,12 @@ class Room:
 
 def demand_of(kind: ConstellationKind) -> Demand:
     """Return what launching kind takes: its machines, one network, its public addresses."""
-    return Demand(hosts=len(kind.machines), networks=1, public=sum(m.public for m in kind.machines))
+    return Demand(
+        hosts=len(kind.machines),
+        networks=1,
+        public=sum(m.public for m in kind.machines),
+        roles=tuple(m.role for m in kind.machines),
+    )
 
 
 def fits(capacity: Capacity, demand: Demand) -> int:
@@ -54,6 +59,7 @@ def fits(capacity: Capacity, demand: Demand) -> int:
             (capacity.hosts, demand.hosts),
             (capacity.networks, demand.networks),
             (capacity.public, demand.public),
+            (capacity.memory_mib or 0, capacity.memory_of(demand)),
         )
         if wanted
     ]
@@ -75,6 +81,7 @@ def pending_demand(provider: Provider) -> Demand:
     }
     networks = {network.name for network in provider.driver.ex_list_networks()}
     hosts = public = 0
+    roles: list[str] = []
     for constellation in launching:
         kind = (
             parse_kind(constellation.definition, set(PLANS))
@@ -85,8 +92,9 @@ def pending_demand(provider: Provider) -> Demand:
             if (constellation.name, machine.name) not in made:
                 hosts += 1
                 public += machine.public
+                roles.append(machine.role)
     unmade_networks = sum(c.name not in networks for c in launching)
-    return Demand(hosts=hosts, networks=unmade_networks, public=public)
+    return Demand(hosts=hosts, networks=unmade_networks, public=public, roles=tuple(roles))
 
 
 def room(provider_name: str, config: Config) -> Room | None:
@@ -123,9 +131,14 @@ def describe(found: Room | None) -> str:
         return "the provider does not say how much more it can take"
     capacity = found.capacity
     kinds = ", ".join(f"{count} {kind}" for kind, count in found.kinds.items())
+    memory = (
+        f", {capacity.memory_mib} MiB of memory ({capacity.memory_limited_by})"
+        if capacity.memory_mib is not None
+        else ""
+    )
     return (
         f"{found.provider}: room for {capacity.hosts} more host(s) ({kinds}; "
-        f"limited by {capacity.limited_by})"
+        f"limited by {capacity.limited_by}){memory}"
     )
 
 

@@ -158,6 +158,9 @@ def capacity(provider: str, as_json: bool) -> None:
                 "public_addresses": found.capacity.public,
                 "limited_by": found.capacity.limited_by,
                 "bounds": found.capacity.bounds,
+                "memory_mib": found.capacity.memory_mib,
+                "memory_limited_by": found.capacity.memory_limited_by,
+                "host_memory_mib": found.capacity.host_memory_mib,
                 "kinds": found.kinds,
             }
         emit(data, as_json, describe(found))

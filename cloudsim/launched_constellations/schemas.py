@@ -89,6 +89,14 @@ class CapacitySchema(Schema):
     networks = fields.Int(allow_none=True, metadata={"description": "More private networks"})
     public_addresses = fields.Int(allow_none=True, metadata={"description": "More public ones"})
     limited_by = fields.Str(allow_none=True, metadata={"description": "The scarcest resource"})
+    memory_mib = fields.Int(
+        allow_none=True, metadata={"description": "Memory left for more machines (MiB)"}
+    )
+    host_memory_mib = fields.Dict(
+        keys=fields.Str(),
+        values=fields.Int(),
+        metadata={"description": "The memory a machine of each role counts as (MiB)"},
+    )
     kinds = fields.Dict(
         keys=fields.Str(),
         values=fields.Int(),

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tests.support.servers import free_port, wait_for
+from tests.support.workers import kill_worker_tree
 
 
 @dataclass(frozen=True)
@@ -21,13 +22,19 @@ class Up:
     address: str
     env: dict[str, str]
     log: Path
+    process: subprocess.Popen[bytes]
+
+    def crash(self) -> None:
+        """SIGKILL the whole tree (web, worker, beat, Redis), as a power cut would."""
+        kill_worker_tree(self.process)
 
 
 @contextmanager
 def cloudsim_up(tmp_path: Path, root: Path, **settings: str) -> Iterator[Up]:
     """Run `cloudsim up` (one worker slot, admin root@example.org, CLOUDSIM_* settings added
     or replacing these) until the block ends, then stop it with Ctrl-C and check it exits
-    cleanly."""
+    cleanly (unless the block crashed it). Run again on the same tmp_path, it finds its
+    instance folder as it was left."""
     address = f"127.0.0.1:{free_port()}"
     env = dict(
         os.environ,
@@ -50,7 +57,8 @@ def cloudsim_up(tmp_path: Path, root: Path, **settings: str) -> Iterator[Up]:
         )
     try:
         wait_for(lambda: "CloudSim is running at" in log.read_text(), 240, "cloudsim up")
-        yield Up(address, env, log)
+        yield Up(address, env, log, process)
     finally:
-        process.send_signal(signal.SIGINT)
-        assert process.wait(60) == 0
+        if process.poll() is None:  # not crashed on purpose: stopped as a user stops it
+            process.send_signal(signal.SIGINT)
+            assert process.wait(60) == 0

@@ -39,6 +39,8 @@ def worker_process(
         CLOUDSIM_LOCAL_PREFIX=config.local_prefix,
         CLOUDSIM_LOCAL_SUBNET_POOL=config.local_subnet_pool,
         CLOUDSIM_LOCAL_PUBLIC_CIDR=config.local_public_cidr,
+        # the test's own floor (a loaded machine's simulator self-test), as in-process workers
+        CLOUDSIM_SIM_MIN_RTF=str(config.sim_min_rtf),
         PYTHONPATH=str(root),
         **(extra_env or {}),
     )
@@ -75,14 +77,17 @@ def kill_worker(process: subprocess.Popen[bytes]) -> None:
     process.wait()
 
 
-def crash_worker(config: Config, root: Path, after: str) -> subprocess.Popen[bytes]:
+def crash_worker(
+    config: Config, root: Path, after: str = "", at: str = ""
+) -> subprocess.Popen[bytes]:
     """Start a worker that SIGKILLs itself (worker and pool) right after a run job's step,
-    named "KIND:STEP" (cloudsim.competition.run_steps)."""
+    named "KIND:STEP" (cloudsim.competition.run_steps), or as any job enters a stage, named
+    "KIND:STAGE" (cloudsim.jobs.runner)."""
     return worker_process(
         config,
         root,
         app="tests.support.crash_worker_app",
-        extra_env={"CLOUDSIM_TEST_CRASH_AFTER": after},
+        extra_env={"CLOUDSIM_TEST_CRASH_AFTER": after, "CLOUDSIM_TEST_CRASH_AT": at},
     )
 
 

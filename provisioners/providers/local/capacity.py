@@ -3,8 +3,9 @@
 All hosts share one kernel and, being root in the same user namespace, one set of per-user
 limits: a storm of launches used to find them by failing (systemd in the 20th host: "Failed
 to create inotify object"). The limits are raised once, within the kernel's own ceilings, to
-what the machine's memory could hold in hosts; the capacity is the smallest of what memory,
-threads, those limits, a configured cap and the subnets left allow.
+what the machine's memory could hold in hosts; the capacity is the smallest of what threads,
+those limits, a configured cap and the subnets left allow, and the memory left, each host
+counted as its role's measured figure (host_memory.py).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from provisioners.providers.capacity import Capacity, Demand
+from provisioners.providers.local.host_memory import HostMemory, measured, uniform
 
 log = logging.getLogger(__name__)
 
@@ -57,8 +59,12 @@ class Budget:
     """What the operator configures: a cap on hosts, memory per host and kept back."""
 
     max_hosts: int = 0  # 0: no cap beyond what the machine allows
-    host_memory_mib: int = 160
+    host_memory_mib: int = 0  # 0: each role's measured figure (host_memory.json)
     memory_reserve_mib: int = 2048
+
+    def figures(self) -> HostMemory:
+        """Return what a host of each role counts: measured, unless the operator set one."""
+        return uniform(self.host_memory_mib) if self.host_memory_mib else measured()
 
 
 def meminfo(path: Path = MEMINFO) -> dict[str, int]:
@@ -72,8 +78,10 @@ def meminfo(path: Path = MEMINFO) -> dict[str, int]:
 
 
 def memory_hosts(budget: Budget, memory: int) -> int:
-    """Return how many hosts fit in memory bytes, after the reserve."""
-    return max(0, (memory - budget.memory_reserve_mib * MIB) // (budget.host_memory_mib * MIB))
+    """Return how many of the smallest hosts fit in memory bytes, after the reserve (what the
+    kernel limits are sized for)."""
+    smallest = budget.figures().smallest() * MIB
+    return max(0, (memory - budget.memory_reserve_mib * MIB) // smallest)
 
 
 def read_limit(limit: KernelLimit, proc_sys: Path = PROC_SYS) -> int | None:
@@ -130,15 +138,8 @@ def host_bounds(
     Limits count as raise_limits leaves them (the next host created raises them).
     """
     committed = hosts_now + pending
-    memory = meminfo()
     # the configured cap first: named as the limit when others allow exactly as many
     bounds = {"configured maximum": budget.max_hosts - committed} if budget.max_hosts else {}
-    bounds |= {
-        "memory": min(
-            memory_hosts(budget, memory["MemTotal"]) - committed,
-            memory_hosts(budget, memory["MemAvailable"]) - pending,
-        ),
-    }
     sized = sized_hosts(budget)
     raised = {}
     for limit in limits:
@@ -159,16 +160,42 @@ def _threads_in_use() -> int:
     return int(LOADAVG.read_text().split()[3].split("/")[1])
 
 
+def memory_bounds(budget: Budget, roles_now: list[str], pending: Demand) -> dict[str, int]:
+    """Return, per limit, the MiB left for more hosts beyond the existing and pending ones.
+
+    Existing and pending hosts count as their role's figure against the machine's memory;
+    against what is available now only pending ones (existing hosts already took theirs).
+    """
+    figures = budget.figures()
+    pending_mib = sum(figures.of(role) for role in pending.roles)
+    committed = sum(figures.of(role) for role in roles_now) + pending_mib
+    memory = meminfo()
+    reserve = budget.memory_reserve_mib
+    bounds = {
+        "memory": memory["MemTotal"] // MIB - reserve - committed,
+        "memory available now": memory["MemAvailable"] // MIB - reserve - pending_mib,
+    }
+    return {name: max(0, value) for name, value in bounds.items()}
+
+
 def capacity(
-    budget: Budget, hosts_now: int, free_networks: int, free_public: int, pending: Demand
+    budget: Budget, roles_now: list[str], free_networks: int, free_public: int, pending: Demand
 ) -> Capacity:
-    """Return what this machine can still take, given existing hosts and pending launches."""
-    bounds = host_bounds(budget, hosts_now, pending.hosts)
+    """Return what this machine can still take, given existing hosts (their roles) and pending
+    launches."""
+    bounds = host_bounds(budget, len(roles_now), pending.hosts)
     limited_by = min(bounds, key=lambda name: bounds[name])
+    memory = memory_bounds(budget, roles_now, pending)
+    memory_limited_by = min(memory, key=lambda name: memory[name])
+    figures = budget.figures()
     return Capacity(
         hosts=bounds[limited_by],
         networks=max(0, free_networks - pending.networks),
         public=max(0, free_public - pending.public),
         limited_by=limited_by,
         bounds=bounds,
+        memory_mib=memory[memory_limited_by],
+        memory_limited_by=memory_limited_by,
+        host_memory_mib=dict(figures.roles_mib),
+        default_host_memory_mib=figures.default_mib,
     )

@@ -45,6 +45,7 @@ IMAGE_NAME = "debian-12 (this machine's root)"
 LOCATION_ID = "localhost"
 DEFAULT_BOOT_TIMEOUT_SECONDS = 60.0
 SUBNET_PREFIX = 24  # what ex_create_network allocates
+ROLE_TAG = "cloudsim:role"  # the tag naming a host's role: what its memory counts as
 
 _Driver = TypeVar("_Driver", bound="LocalNodeDriver")
 _Params = ParamSpec("_Params")
@@ -95,7 +96,7 @@ class LocalNodeDriver(CloudSimNodeDriver):
         memory_reserve_mib: int = Budget.memory_reserve_mib,
     ) -> None:
         super().__init__(key=key, secret=secret)
-        if min(max_hosts, host_memory_mib - 1, memory_reserve_mib) < 0:
+        if min(max_hosts, host_memory_mib, memory_reserve_mib) < 0:
             raise InvalidRequestError("max_hosts and memory figures must not be negative")
         self.budget = Budget(max_hosts, host_memory_mib, memory_reserve_mib)
         state_path = Path(state_dir)
@@ -194,9 +195,8 @@ class LocalNodeDriver(CloudSimNodeDriver):
         public = self._networks.public_subnet
         # the network and broadcast addresses, and the "internet" end of the public network
         free_public = public.num_addresses - 3 - sum(1 for n in nodes if n.public_ip)
-        return capacity(
-            self.budget, len(nodes), self._free_subnets(), free_public, pending or Demand()
-        )
+        roles = [node.tags.get(ROLE_TAG, "") for node in nodes]
+        return capacity(self.budget, roles, self._free_subnets(), free_public, pending or Demand())
 
     def _free_subnets(self) -> int:
         taken = [
