@@ -6,6 +6,8 @@ import logging
 import os
 import threading
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 from sqlalchemy import update
@@ -81,3 +83,29 @@ def in_pool_process() -> bool:
     from billiard.process import current_process
 
     return current_process().name.startswith("ForkPoolWorker")
+
+
+@contextmanager
+def reporting_wait(
+    log_line: Callable[[str], None], what: str, every: float = 30.0
+) -> Iterator[None]:
+    """Log "still WHAT (N s)" every `every` seconds while the block runs.
+
+    Only for a wait bounded by a deadline of its own (a subprocess with a timeout): the
+    watchdog then sees progress, and the user sees what the job is doing, instead of a
+    long silent step stopped as stuck.
+    """
+    stop = threading.Event()
+    started = time.monotonic()
+
+    def tick() -> None:
+        while not stop.wait(every):
+            log_line(f"still {what} ({time.monotonic() - started:.0f} s)")
+
+    ticker = threading.Thread(target=tick, name="job-reporting-wait", daemon=True)
+    ticker.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        ticker.join()

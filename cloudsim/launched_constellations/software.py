@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from cloudsim.config import Config
+from cloudsim.jobs.heartbeat import reporting_wait
 from cloudsim.jobs.runner import JobContext
 from cloudsim.launched_constellations.keys import (
     instance_admin_password,
@@ -139,13 +140,16 @@ def preinstall(
     for need, (distribution, venv, requirement) in PREINSTALLED.items():
         if need not in wanted:
             continue
-        wheels = build_wheelhouse(
-            distribution_source(distribution),
-            config.instance_dir / "wheelhouse",
-            config.machine_python,
-        )
         try:
-            made = driver.ex_image_layer(wheels.name, preinstall_command(wheels, venv, requirement))
+            # the first launch builds both (minutes on a loaded machine); each has a deadline
+            with reporting_wait(log, f"installing {requirement} into the machines' image"):
+                wheels = build_wheelhouse(
+                    distribution_source(distribution),
+                    config.instance_dir / "wheelhouse",
+                    config.machine_python,
+                )
+                command = preinstall_command(wheels, venv, requirement)
+                made = driver.ex_image_layer(wheels.name, command)
         except ProviderError as exc:
             log(f"could not install {requirement} into the image ({exc}): each machine will")
             continue

@@ -25,6 +25,7 @@ SUMS = "SHA256SUMS"
 SOURCE_TARBALL = "cloudsim-source.tar.gz"
 EDITABLES = "EDITABLES"  # the bundle's distributions installed from its source, one folder a line
 REMOTE_ROOT = "/opt/cloudsim/wheelhouse"
+WHEELHOUSE_SECONDS = 900  # pip wheel of a distribution and its dependencies, cached after
 _SKIP = {"__pycache__", ".egg-info", "build", "dist", ".pytest_cache"}
 
 
@@ -86,12 +87,15 @@ def build_wheelhouse(source: Path, cache_dir: Path, python: str) -> Path:
             copy = Path(scratch) / "source" / source.name
             shutil.copytree(source, copy, ignore=shutil.ignore_patterns(*_SKIP, "*.egg-info"))
             wheels = Path(scratch) / "wheels"
-            result = subprocess.run(
-                [python, "-m", "pip", "wheel", "--quiet", "--wheel-dir", str(wheels), str(copy)],
-                capture_output=True,
-                text=True,
-                check=False,
-            )
+            argv = [python, "-m", "pip", "wheel", "--quiet", "--wheel-dir", str(wheels), str(copy)]
+            try:
+                result = subprocess.run(
+                    argv, capture_output=True, text=True, check=False, timeout=WHEELHOUSE_SECONDS
+                )
+            except subprocess.TimeoutExpired as exc:
+                raise WheelhouseError(
+                    f"pip wheel {source} did not finish in {WHEELHOUSE_SECONDS} s"
+                ) from exc
             if result.returncode != 0:
                 raise WheelhouseError(f"pip wheel {source} failed: {result.stderr.strip()[-2000:]}")
             sums = "".join(

@@ -1,0 +1,22 @@
+"""A long wait with a deadline of its own reports itself, so the watchdog does not stop it."""
+
+from __future__ import annotations
+
+import threading
+
+from cloudsim.jobs.heartbeat import reporting_wait
+
+
+def test_a_reporting_wait_logs_while_it_lasts_and_stops_after() -> None:
+    lines: list[str] = []
+    told = threading.Event()
+
+    def log_line(line: str) -> None:
+        lines.append(line)
+        told.set()
+
+    with reporting_wait(log_line, "building the image", every=0.05):
+        assert told.wait(10)  # the block's own work, here: waiting to be reported
+    after = len(lines)
+    assert lines[0].startswith("still building the image (") and lines[0].endswith(" s)")
+    assert not threading.Event().wait(0.2) and len(lines) == after  # nothing once it ended
