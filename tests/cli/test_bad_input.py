@@ -13,10 +13,11 @@ from pathlib import Path
 
 import click
 import pytest
-from click.testing import CliRunner, Result
+from click.testing import Result
 
 from cloudsim.cli import main
 from cloudsim.cli.files import MAX_FILE_BYTES, TextFile
+from tests.support.cli import migrated_cli
 from tests.support.servers import RedisServer
 
 # What click makes of the Latin-1 byte 0xE9 in argv on a UTF-8 system: a lone surrogate.
@@ -74,18 +75,12 @@ def run(
     tmp_path_factory: pytest.TempPathFactory, redis_server: RedisServer, encryption_key: str
 ) -> Callable[..., Result]:
     """Run a command on one migrated database (every command here must leave it unchanged)."""
-    env = {
-        "CLOUDSIM_INSTANCE_DIR": str(tmp_path_factory.mktemp("cli") / "instance"),
-        "CLOUDSIM_REDIS_URL": redis_server.url(0),
-        "CLOUDSIM_ENCRYPTION_KEYS": encryption_key,
-        "CLOUDSIM_LOCAL_PREFIX": f"bi{os.getpid() % 100000}",
-    }
-
-    def invoke(*args: str) -> Result:
-        return CliRunner().invoke(main, list(args), env=env)
-
-    assert invoke("db", "upgrade").exit_code == 0
-    return invoke
+    return migrated_cli(
+        tmp_path_factory.mktemp("cli") / "instance",
+        redis_server.url(0),
+        encryption_key,
+        CLOUDSIM_LOCAL_PREFIX=f"bi{os.getpid() % 100000}",
+    )
 
 
 def test_every_command_that_reads_a_file_reads_it_bounded() -> None:

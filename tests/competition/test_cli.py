@@ -7,29 +7,19 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner, Result
+from click.testing import Result
 from flask import Flask
 
-from cloudsim.cli import main
 from cloudsim.competition.demo import DEMO_TASK, DemoJob, schedule_demo
 from cloudsim.extensions import db
 from cloudsim.models import Job, Task, Team
+from tests.support.cli import migrated_cli
 from tests.support.servers import RedisServer
 
 
 @pytest.fixture
 def run(tmp_path: Path, redis_server: RedisServer, encryption_key: str) -> Callable[..., Result]:
-    env = {
-        "CLOUDSIM_INSTANCE_DIR": str(tmp_path / "instance"),
-        "CLOUDSIM_REDIS_URL": redis_server.url(0),
-        "CLOUDSIM_ENCRYPTION_KEYS": encryption_key,
-    }
-
-    def invoke(*args: str) -> Result:
-        return CliRunner().invoke(main, list(args), env=env)
-
-    assert invoke("db", "upgrade").exit_code == 0
-    return invoke
+    return migrated_cli(tmp_path / "instance", redis_server.url(0), encryption_key)
 
 
 def test_tasks_schedule_and_leaderboard_from_the_command_line(

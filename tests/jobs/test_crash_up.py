@@ -143,10 +143,6 @@ def _recover(tmp_path: Path, root: Path, token: str, job_id: str) -> None:
         assert job["state"] == "succeeded", f"{job['error']}\n{job['log'][-3000:]}"
 
 
-@pytest.mark.skip(
-    reason="not yet run to its end: the shared 2-core machine ran at load 20-25 all session "
-    "(crashsuite branch report); run it once alone, then remove this mark"
-)
 @pytest.mark.timeout(3000)  # a vrc launched and terminated through three power cuts
 def test_the_whole_up_tree_killed_during_launch_and_terminate_loses_nothing(
     tmp_path: Path, pytestconfig: pytest.Config

@@ -7,26 +7,20 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner, Result
+from click.testing import Result
 
-from cloudsim.cli import main
+from tests.support.cli import migrated_cli
 from tests.support.servers import RedisServer
 
 
 @pytest.fixture
 def run(tmp_path: Path, redis_server: RedisServer, encryption_key: str) -> Callable[..., Result]:
-    env = {
-        "CLOUDSIM_INSTANCE_DIR": str(tmp_path / "instance"),
-        "CLOUDSIM_REDIS_URL": redis_server.url(0),  # a broker, but no worker behind it
-        "CLOUDSIM_ENCRYPTION_KEYS": encryption_key,
-        "CLOUDSIM_LOCAL_PREFIX": "t15cli",  # nothing of the local provider's is shared
-    }
-
-    def invoke(*args: str) -> Result:
-        return CliRunner().invoke(main, list(args), env=env)
-
-    assert invoke("db", "upgrade").exit_code == 0
-    return invoke
+    return migrated_cli(
+        tmp_path / "instance",
+        redis_server.url(0),
+        encryption_key,
+        CLOUDSIM_LOCAL_PREFIX="t15cli",  # nothing of the local provider's is shared
+    )
 
 
 def test_terminate_wait_runs_the_job_itself_when_no_worker_is_alive(

@@ -7,26 +7,16 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner, Result
+from click.testing import Result
 
-from cloudsim.cli import main
 from tests.seasons.test_phases import season
+from tests.support.cli import migrated_cli
 from tests.support.servers import RedisServer
 
 
 @pytest.fixture
 def run(tmp_path: Path, redis_server: RedisServer, encryption_key: str) -> Callable[..., Result]:
-    env = {
-        "CLOUDSIM_INSTANCE_DIR": str(tmp_path / "instance"),
-        "CLOUDSIM_REDIS_URL": redis_server.url(0),
-        "CLOUDSIM_ENCRYPTION_KEYS": encryption_key,
-    }
-
-    def invoke(*args: str) -> Result:
-        return CliRunner().invoke(main, list(args), env=env)
-
-    assert invoke("db", "upgrade").exit_code == 0
-    return invoke
+    return migrated_cli(tmp_path / "instance", redis_server.url(0), encryption_key)
 
 
 def test_phases_from_the_command_line(run: Callable[..., Result], tmp_path: Path) -> None:
