@@ -34,7 +34,10 @@ def phase_data(phase: Phase) -> dict[str, object]:
 
 @click.group()
 def phase() -> None:
-    """List, schedule and reveal the season's phases (written in the season YAML)."""
+    """List, schedule and reveal the season's phases.
+
+    Phases are written in the season YAML (cloudsim schedule import).
+    """
 
 
 @phase.command("list")

@@ -90,7 +90,7 @@ def test_a_served_run_reads_back_message_by_message(server: Any, tmp_path: Path)
             while (got := client.receive(0.05)) is not None:
                 received[got[0]] += 1
         # refused (the stand behaviour owns the joint) and still recorded, as in commands.jsonl
-        assert not client.request({"op": "joints", "position": {"neck_ry": 0.2}})["ok"]
+        assert not client.request({"op": "joints", "position": {"l_leg_kny": 0.2}})["ok"]
         assert client.behaviour("walk", pose=[1.0, 0.0, 0.0])["ok"]
         for _ in range(30):  # past 1 s: a key frame of /tf
             client.step(40)

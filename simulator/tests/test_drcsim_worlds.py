@@ -86,7 +86,10 @@ def test_serve_loads_the_world_file_and_scores_by_its_rules(server, tmp_path: Pa
     world_file.write_text(json.dumps(doc))
     process, port = server("vrc_task_2", "1", "--world-file", str(world_file), logs=True)
     with SimClient("127.0.0.1", port) as client:
-        assert client.step(20)["score"]["checkpoints"] == 1
+        # credited once the robot has stood STEADY_S (3 s) after it holds: 3.1 s of steps
+        for _ in range(31):
+            state = client.step(100)
+        assert state["score"]["checkpoints"] == 1
     process.terminate()
     assert process.wait(timeout=30) == 0
     run = tmp_path / "run-0"

@@ -191,7 +191,16 @@ def test_a_revoked_client_cannot_connect(lab: RouterLab) -> None:
     lab.csrouter("arm", "--latency-ms", "0", "--run-id", "revoke")
     revoked = lab.clients["ocu"].serial
     assert lab.apply_router(lab.vpn_material(revoked=[revoked, lab.clients["departed"].serial])) > 0
-    # its session is ended over the management socket; reconnecting, the list refuses it
+    # its session is ended over the management socket, with the reason, and the client stops
+    client = "journalctl -u openvpn-client@ocu --no-pager -o cat"
+    wait_for(
+        lambda: "Halt command was pushed by server" in lab.run("ocu", client),
+        30,
+        "the client to be told to stop",
+    )
+    assert not lab.ping("ocu", lab.ip("sim"), count=3).ok
+    # started again, the revocation list refuses it
+    lab.run("ocu", "systemctl restart openvpn-client@ocu")
     journal = "journalctl -u openvpn-server@cloudsim --no-pager -o cat"
     wait_for(
         lambda: "certificate revoked" in lab.run("router", journal), 30, "the server to refuse"

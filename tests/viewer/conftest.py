@@ -18,7 +18,8 @@ from cloudsim.extensions import db
 from cloudsim.models import Run, RunState, Team, utcnow
 from tests.competition.support import open_task, store_log
 
-RUN_S = 17.0  # simulated: the walker takes the robot through gate_1 (x = 4 m) at about 15.5 s
+RUN_S = 19.5  # simulated: the walker takes the robot through gate_1 (x = 4 m) at about 15.5 s,
+# credited once it stayed up 3 s more (drcsim.scoring.STEADY_S)
 LOGS = ("meta.json", "state.msgpack", "score.jsonl", "commands.jsonl", "final.json")
 
 
